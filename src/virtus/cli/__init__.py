@@ -1,0 +1,55 @@
+"""The ``virtus`` command: a thin layer that parses arguments, calls library functions, prints.
+
+Each sub-command lives in its own module here and exposes ``register(app)``. Heavy imports
+(Mitsuba, OpenCV) happen inside the command functions so ``virtus --help`` stays fast.
+Errors caused by bad input (:class:`virtus.VirtusError`, ``OSError``) are printed as one line
+on stderr, with exit status 2 and no traceback.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import click
+import typer
+
+from virtus.errors import VirtusError
+
+app = typer.Typer(
+    name="virtus",
+    help="virtus: a virtual fringe projection profilometry sensor.",
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    add_completion=False,
+)
+
+
+def _register_commands() -> None:
+    # One module per sub-command (import order = order in --help).
+    from virtus.cli import rig_cmd
+
+    for module in (rig_cmd,):
+        module.register(app)
+
+
+_register_commands()
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of the console script; ``argv`` defaults to ``sys.argv[1:]``."""
+    try:
+        code = app(args=argv, prog_name="virtus", standalone_mode=False)
+    except click.exceptions.Abort:
+        print("virtus: aborted", file=sys.stderr)
+        sys.exit(130)
+    except click.ClickException as error:
+        error.show()
+        sys.exit(error.exit_code)
+    except VirtusError as error:
+        print(f"virtus: error: {error}", file=sys.stderr)
+        sys.exit(2)
+    except OSError as error:
+        print(f"virtus: error: {error.strerror or error}: {error.filename or ''}".rstrip(": "),
+              file=sys.stderr)
+        sys.exit(2)
+    sys.exit(code if isinstance(code, int) else 0)
