@@ -49,7 +49,9 @@ def main(argv: list[str] | None = None) -> None:
         print(f"virtus: error: {error}", file=sys.stderr)
         sys.exit(2)
     except OSError as error:
-        print(f"virtus: error: {error.strerror or error}: {error.filename or ''}".rstrip(": "),
-              file=sys.stderr)
+        print(
+            f"virtus: error: {error.strerror or error}: {error.filename or ''}".rstrip(": "),
+            file=sys.stderr,
+        )
         sys.exit(2)
     sys.exit(code if isinstance(code, int) else 0)
