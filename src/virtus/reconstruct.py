@@ -1,0 +1,312 @@
+"""Triangulation: camera pixels + projector coordinates -> 3D points in the camera frame.
+
+A camera pixel ``(u, v)`` defines a ray from the camera centre; the decoded projector
+coordinates define either a second ray (both ``u_p`` and ``v_p`` known) or a surface of
+projector rays (one coordinate known). The point is where they meet:
+
+* ``use="uv"``: least-squares ray-ray intersection, i.e. the midpoint of the shortest
+  segment between the camera ray and the projector ray.
+* ``use="u"`` or ``use="v"``: intersection of the camera ray with the set of projector rays
+  whose ``u_p`` (or ``v_p``) equals the decoded value. Without projector distortion that set
+  is a plane through the projector centre (closed form); with distortion it is a curved
+  ruled surface, and the plane solution is refined along the camera ray by Newton's method
+  on the projected coordinate until it matches to ``1e-9`` px.
+
+Lens distortion of the camera is handled by :meth:`Intrinsics.unproject` (exact iterative
+undistortion), that of the projector by ``unproject`` / ``project`` likewise.
+
+Conventions: metres, OpenCV frames (x right, y down, z forward), pixel (col 0, row 0)
+centred at (u, v) = (0, 0), maps indexed ``[row, col]``; ``rig.proj2cam`` maps projector-frame
+points into the camera frame (``X_cam = R @ X_proj + t``), so ``t`` is the projector centre
+in the camera frame. Points that cannot be triangulated (invalid input, parallel rays,
+intersection behind either device) come back as NaN; nothing is clamped.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+
+from virtus.checks import as_float_array, as_points
+from virtus.errors import InputError
+
+if TYPE_CHECKING:
+    from virtus.optics import Intrinsics, Rig
+
+__all__ = [
+    "Use",
+    "depth_map",
+    "normals_from_points",
+    "points_from_decoded",
+    "triangulate",
+    "valid_points",
+]
+
+Use = Literal["uv", "u", "v"]
+_USES = ("uv", "u", "v")
+
+#: Rays closer to parallel than this (sine of the angle between them) are not intersected:
+#: at 1e-9 rad the depth is undetermined far beyond any working volume.
+_MIN_SINE = 1e-9
+#: Newton refinement on the projector coordinate for distorted projectors (``use="u"|"v"``).
+_NEWTON_TOL_PX = 1e-9
+_NEWTON_MAX_ITER = 30
+
+
+def triangulate(
+    rig: Rig,
+    cam_px: object,
+    proj_uv: object,
+    use: Use = "uv",
+) -> np.ndarray:
+    """Triangulate camera pixels against decoded projector coordinates.
+
+    Parameters
+    ----------
+    rig : the calibrated (or true) camera-projector rig.
+    cam_px : (N, 2) float, camera pixel coordinates ``(u, v)``; must be finite.
+    proj_uv : (N, 2) float, projector coordinates ``(u_p, v_p)`` in projector pixels; NaN
+        marks an undecoded coordinate. With ``use="u"`` only column 0 is read, with
+        ``use="v"`` only column 1.
+    use : which projector coordinates constrain the point: ``"uv"`` (ray-ray least
+        squares), ``"u"`` or ``"v"`` (ray-surface intersection).
+
+    Returns
+    -------
+    (N, 3) float64, points in the camera frame in metres; NaN rows where the needed
+    projector coordinates are NaN, the rays are parallel, or the point would lie behind
+    the camera or the projector.
+    """
+    cam = as_points("cam_px", cam_px, 2)
+    proj = as_points("proj_uv", proj_uv, 2, allow_nan=True)
+    if proj.shape[0] != cam.shape[0]:
+        raise InputError("proj_uv", f"{cam.shape[0]} rows like cam_px", f"{proj.shape[0]} rows")
+    if use not in _USES:
+        raise InputError("use", "one of 'uv', 'u', 'v'", use)
+
+    needed = proj if use == "uv" else proj[:, :1] if use == "u" else proj[:, 1:]
+    valid = np.isfinite(needed).all(axis=1)
+    points = np.full((cam.shape[0], 3), np.nan)
+    if not valid.any():
+        return points
+
+    rays_cam = rig.camera.intrinsics.unproject(cam[valid])
+    if use == "uv":
+        out = _ray_ray(rig, rays_cam, proj[valid])
+    else:
+        axis = 0 if use == "u" else 1
+        out = _ray_surface(rig, rays_cam, proj[valid, axis], axis)
+    points[valid] = out
+    return points
+
+
+def points_from_decoded(
+    rig: Rig,
+    proj_uv: object,
+    mask: object | None = None,
+    use: Use = "uv",
+) -> np.ndarray:
+    """Triangulate a whole decoded image.
+
+    Parameters
+    ----------
+    rig : camera-projector rig; the camera's image size must match ``proj_uv``.
+    proj_uv : (H, W, 2) float, projector coordinates ``(u_p, v_p)`` per camera pixel,
+        NaN where not decoded.
+    mask : (H, W) bool, optional; pixels to triangulate (default: all with finite input).
+    use : see :func:`triangulate`.
+
+    Returns
+    -------
+    (H, W, 3) float64 point map in the camera frame, metres; NaN where invalid.
+    """
+    intr = rig.camera.intrinsics
+    uv = as_float_array("proj_uv", proj_uv, (intr.height, intr.width, 2), allow_nan=True)
+    keep = np.ones(uv.shape[:2], dtype=bool) if mask is None else _as_mask(mask, uv.shape[:2])
+    grid = intr.pixel_grid()
+    points = np.full(uv.shape[:2] + (3,), np.nan)
+    points[keep] = triangulate(rig, grid[keep], uv[keep], use=use)
+    return points
+
+
+def depth_map(
+    rig: Rig,
+    proj_uv: object,
+    mask: object | None = None,
+    use: Use = "uv",
+) -> np.ndarray:
+    """Depth (camera-frame z, metres) per camera pixel; NaN where invalid.
+
+    Same arguments as :func:`points_from_decoded`; returns an (H, W) float64 array.
+    """
+    return points_from_decoded(rig, proj_uv, mask, use)[..., 2]
+
+
+def valid_points(point_map: object) -> tuple[np.ndarray, np.ndarray]:
+    """Flatten a point map to its valid points.
+
+    Parameters
+    ----------
+    point_map : (H, W, 3) float, NaN where invalid.
+
+    Returns
+    -------
+    points : (N, 3) float64, the finite points in row-major pixel order.
+    pixels : (N, 2) int64, their ``(row, col)`` indices.
+    """
+    pts = as_float_array("point_map", point_map, (None, None, 3), allow_nan=True)
+    ok = np.isfinite(pts).all(axis=-1)
+    rows, cols = np.nonzero(ok)
+    return pts[ok], np.stack([rows, cols], axis=1).astype(np.int64)
+
+
+def normals_from_points(point_map: object) -> np.ndarray:
+    """Unit surface normals of an organised point map, oriented towards the camera.
+
+    Central differences along rows and columns (one-sided at borders and next to invalid
+    pixels) give two tangents; their cross product is the normal.
+
+    Parameters
+    ----------
+    point_map : (H, W, 3) float, camera frame, NaN where invalid.
+
+    Returns
+    -------
+    (H, W, 3) float64 unit normals (n . X <= 0, i.e. facing the camera at the origin);
+    NaN where the point or both neighbours along a direction are invalid.
+    """
+    pts = as_float_array("point_map", point_map, (None, None, 3), allow_nan=True)
+    d_col = _central_difference(pts, axis=1)
+    d_row = _central_difference(pts, axis=0)
+    normals = np.cross(d_col, d_row)
+    norm = np.linalg.norm(normals, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        normals = np.where(norm > 0, normals / norm, np.nan)
+    flip = np.einsum("...k,...k->...", normals, pts) > 0
+    normals[flip] *= -1.0
+    return normals
+
+
+# --- internals -----------------------------------------------------------------------------
+
+
+def _as_mask(mask: object, shape: tuple[int, ...]) -> np.ndarray:
+    array = np.asarray(mask)
+    if array.dtype != bool or array.shape != shape:
+        raise InputError("mask", f"a bool array of shape {shape}", f"{array.dtype} {array.shape}")
+    return array
+
+
+def _ray_ray(rig: Rig, rays_cam: np.ndarray, proj_uv: np.ndarray) -> np.ndarray:
+    """Midpoints of the shortest segments between camera rays and projector rays."""
+    pose = rig.proj2cam
+    origin = np.asarray(pose.t, dtype=np.float64)
+    rays_proj = pose.apply_direction(rig.projector.intrinsics.unproject(proj_uv))
+    # Camera ray s*a (origin 0), projector ray o + r*b, |a| = |b| = 1. Normal equations of
+    # min |s a - o - r b|^2:  s - c r = a.o,  c s - r = b.o  with c = a.b.
+    a, b = rays_cam, rays_proj
+    c = np.einsum("ij,ij->i", a, b)
+    ao = a @ origin
+    bo = b @ origin
+    denom = 1.0 - c * c
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = (ao - c * bo) / denom
+        r = (c * ao - bo) / denom
+    bad = (denom < _MIN_SINE**2) | (s <= 0) | (r <= 0)
+    points = 0.5 * (s[:, None] * a + origin + r[:, None] * b)
+    points[bad] = np.nan
+    return points
+
+
+def _ray_surface(rig: Rig, rays_cam: np.ndarray, coord: np.ndarray, axis: int) -> np.ndarray:
+    """Intersect camera rays with the projector's constant-``u_p`` (axis 0) or ``v_p`` surface."""
+    proj_intr = rig.projector.intrinsics
+    cam2proj = rig.proj2cam.inverse()
+    pose = rig.proj2cam
+    origin = np.asarray(pose.t, dtype=np.float64)
+    R = np.asarray(pose.R, dtype=np.float64)
+    K = proj_intr.K
+    # Pinhole plane in the projector frame: x_n = (u_p - cx) / fx, i.e. n = (1, 0, -x_n) for
+    # u_p (and (0, 1, -y_n) for v_p); skew is zero in this model.
+    f = K[axis, axis]
+    c0 = K[axis, 2]
+    normal_proj = np.zeros((coord.shape[0], 3))
+    normal_proj[:, axis] = 1.0
+    normal_proj[:, 2] = -(coord - c0) / f
+    if proj_intr.has_distortion:
+        # Undistort at the decoded coordinate and the principal point's other coordinate:
+        # a good start for Newton's method below.
+        start = np.empty((coord.shape[0], 2))
+        start[:, axis] = coord
+        start[:, 1 - axis] = K[1 - axis, 2]
+        xy = proj_intr.undistort_normalized((start - K[:2, 2]) / np.diag(K)[:2])
+        normal_proj[:, 2] = -xy[:, axis]
+    normal_cam = normal_proj @ R.T
+    # Camera ray X = s * a meets the plane n.(X - o) = 0 at s = n.o / n.a.
+    na = np.einsum("ij,ij->i", normal_cam, rays_cam)
+    no = normal_cam @ origin
+    sine = np.abs(na) / np.linalg.norm(normal_cam, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = no / na
+    bad = ~(sine >= _MIN_SINE) | ~(s > 0)
+    if proj_intr.has_distortion:
+        s = _newton_depth(proj_intr, cam2proj, rays_cam, coord, axis, np.where(bad, np.nan, s))
+        bad |= ~(s > 0)
+    points = s[:, None] * rays_cam
+    in_proj = cam2proj.apply(np.where(bad[:, None], 0.0, points))
+    bad |= in_proj[:, 2] <= 0
+    points[bad] = np.nan
+    return points
+
+
+def _newton_depth(
+    proj_intr: Intrinsics,
+    cam2proj: object,
+    rays_cam: np.ndarray,
+    coord: np.ndarray,
+    axis: int,
+    s: np.ndarray,
+) -> np.ndarray:
+    """Refine ray parameters ``s`` so that projecting ``s * ray`` gives ``coord`` exactly."""
+    s = s.copy()
+    active = np.isfinite(s)
+    for _ in range(_NEWTON_MAX_ITER):
+        if not active.any():
+            break
+        idx = np.nonzero(active)[0]
+        si = s[idx]
+        h = 1e-7 * si  # relative step: the projected coordinate is smooth in s
+        f0 = _projected(proj_intr, cam2proj, si[:, None] * rays_cam[idx], axis) - coord[idx]
+        f1 = _projected(proj_intr, cam2proj, (si + h)[:, None] * rays_cam[idx], axis) - coord[idx]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            step = f0 * h / (f1 - f0)
+        new = si - step
+        # A step that leaves the working side (s <= 0) or fails to be finite is divergence.
+        diverged = ~np.isfinite(new) | (new <= 0)
+        new[diverged] = np.nan
+        s[idx] = new
+        converged = np.abs(f0) < _NEWTON_TOL_PX
+        active[idx[converged | diverged]] = False
+    s[active] = np.nan  # not converged within the iteration budget
+    return s
+
+
+def _projected(proj_intr: Intrinsics, cam2proj: object, points_cam: np.ndarray, axis: int):
+    return proj_intr.project(cam2proj.apply(points_cam))[:, axis]  # type: ignore[attr-defined]
+
+
+def _central_difference(points: np.ndarray, axis: int) -> np.ndarray:
+    forward = np.roll(points, -1, axis=axis) - points
+    backward = points - np.roll(points, 1, axis=axis)
+    # np.roll wraps around: invalidate the wrapped borders.
+    index = [slice(None)] * 3
+    index[axis] = -1
+    forward[tuple(index)] = np.nan
+    index[axis] = 0
+    backward[tuple(index)] = np.nan
+    ok_f = np.isfinite(forward).all(axis=-1, keepdims=True)
+    ok_b = np.isfinite(backward).all(axis=-1, keepdims=True)
+    both = ok_f & ok_b
+    out = np.where(both, 0.5 * (forward + backward), np.where(ok_f, forward, backward))
+    return np.where(ok_f | ok_b, out, np.nan)
