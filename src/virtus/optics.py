@@ -75,7 +75,8 @@ class Intrinsics:
         dist = as_float_array("dist", self.dist).ravel()
         if dist.size not in _DIST_LENGTHS:
             raise InputError("dist", "0, 4, 5 or 8 OpenCV coefficients", f"{dist.size}")
-        object.__setattr__(self, "dist", tuple(float(d) for d in dist))
+        # all-zero coefficients are the ideal pinhole: store () so equal lenses compare equal
+        object.__setattr__(self, "dist", tuple(float(d) for d in dist) if dist.any() else ())
 
     # -- OpenCV interop ---------------------------------------------------------------------
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import sys
 
-import click
 import typer
 
 from virtus.errors import VirtusError
@@ -36,22 +35,17 @@ _register_commands()
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Entry point of the console script; ``argv`` defaults to ``sys.argv[1:]``."""
+    """Entry point of the console script; ``argv`` defaults to ``sys.argv[1:]``.
+
+    Typer handles usage errors itself (exit 2 with a usage line); errors raised by the
+    library for bad input or missing files become one line on stderr, exit status 2.
+    """
     try:
-        code = app(args=argv, prog_name="virtus", standalone_mode=False)
-    except click.exceptions.Abort:
-        print("virtus: aborted", file=sys.stderr)
-        sys.exit(130)
-    except click.ClickException as error:
-        error.show()
-        sys.exit(error.exit_code)
+        app(args=argv, prog_name="virtus")
     except VirtusError as error:
         print(f"virtus: error: {error}", file=sys.stderr)
         sys.exit(2)
     except OSError as error:
-        print(
-            f"virtus: error: {error.strerror or error}: {error.filename or ''}".rstrip(": "),
-            file=sys.stderr,
-        )
+        where = f": {error.filename}" if error.filename else ""
+        print(f"virtus: error: {error.strerror or error}{where}", file=sys.stderr)
         sys.exit(2)
-    sys.exit(code if isinstance(code, int) else 0)

@@ -1,0 +1,84 @@
+"""``virtus rig info``: print a rig (default: the paper's) in the rig JSON schema."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+#: The paper's camera sensor: 20.9995 mm aperture over 960 px.
+PAPER_PIXEL_SIZE_MM = 20.9995 / 960
+
+
+def rig_info(rig_path: Path | None, pixel_size_mm: float) -> dict[str, Any]:
+    """The rig schema of ``rig_path`` (or the default rig) plus Isaac Sim camera parameters
+    (mm, for square pixels of ``pixel_size_mm``) and the projector's footprint at 1 m."""
+    from virtus.optics import Rig, default_rig, isaac_params, projected_size
+
+    rig = Rig.load_json(rig_path) if rig_path is not None else default_rig()
+    info = rig.to_dict()
+    isaac = isaac_params(rig.camera.intrinsics, pixel_size_mm).to_dict()
+    info["isaac"] = {"units": "mm", "pixel_size": pixel_size_mm, **isaac}
+    width, height = projected_size(rig.projector.intrinsics, 1.0)
+    info["projected_size_m"] = {"distance_m": 1.0, "width": width, "height": height}
+    info["baseline_m"] = rig.baseline_m
+    return info
+
+
+def register(app: typer.Typer) -> None:
+    rig_app = typer.Typer(help="Inspect camera-projector rigs.", no_args_is_help=True)
+    app.add_typer(rig_app, name="rig")
+
+    @rig_app.command("info")
+    def info(
+        rig: Annotated[
+            Path | None, typer.Option(help="Rig or calibration JSON; default: the paper's rig.")
+        ] = None,
+        json_out: Annotated[bool, typer.Option("--json", help="Print JSON only.")] = False,
+        pixel_size_mm: Annotated[
+            float, typer.Option(help="Camera pixel size for the Isaac parameters, mm.")
+        ] = PAPER_PIXEL_SIZE_MM,
+    ) -> None:
+        """Print the rig (DESIGN schema), Isaac Sim camera parameters and projected size."""
+        data = rig_info(rig, pixel_size_mm)
+        if json_out:
+            typer.echo(json.dumps(data, indent=2))
+            return
+        _print_table(data)
+
+
+def _print_table(data: dict[str, Any]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title="virtus rig", show_header=True)
+    table.add_column("device")
+    table.add_column("size px")
+    table.add_column("fx, fy px")
+    table.add_column("cx, cy px")
+    table.add_column("dist (k1 k2 p1 p2 k3)")
+    for name in ("camera", "projector"):
+        dev = data[name]
+        K = dev["K"]  # noqa: N806
+        table.add_row(
+            name,
+            f"{dev['width']} x {dev['height']}",
+            f"{K[0][0]:.3f}, {K[1][1]:.3f}",
+            f"{K[0][2]:.3f}, {K[1][2]:.3f}",
+            " ".join(f"{d:.4g}" for d in dev["dist"]),
+        )
+    console = Console()
+    console.print(table)
+    t = data["proj2cam"]["t"]
+    console.print(f"proj2cam t (projector centre in camera frame): {t} m")
+    console.print(f"baseline: {data['baseline_m'] * 1000:.3f} mm")
+    isaac = data["isaac"]
+    console.print(
+        f"Isaac camera (mm): focal {isaac['focal_length']:.4f}, apertures "
+        f"{isaac['horizontal_aperture']:.4f} x {isaac['vertical_aperture']:.4f}, offsets "
+        f"{isaac['horizontal_aperture_offset']:.4f}, {isaac['vertical_aperture_offset']:.4f}"
+    )
+    size = data["projected_size_m"]
+    console.print(f"projected size at 1 m: {size['width']:.4f} m x {size['height']:.4f} m")
