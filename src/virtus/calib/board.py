@@ -1,0 +1,284 @@
+"""Asymmetric circle-grid calibration boards: geometry, the paper's scale equations, texture.
+
+Board frame (metres): origin at the centre of the plane (= centre of the texture), x along
+the texture columns, y along the texture rows, z = x cross y (pointing into the board, away
+from a viewer who sees x to the right and y downwards, as OpenCV's calibration boards).
+The circles lie in z = 0.
+
+Layout of a board with ``rows`` R and ``cols`` C (the paper's 4x7, 5x9, 7x13): C columns of
+circles, ``D_centers / 2`` apart along x; each column holds R circles ``D_centers`` apart
+along y, and odd columns are shifted by ``D_centers / 2`` along y (the asymmetric grid of
+OpenCV). The paper sizes the printed pattern as (DESIGN.md section 4)
+
+    W_pat = (2 L_b + (C - 1) D_centers / 2 + D_circle) k
+    H_pat = (2 L_b + (R - 1) D_centers + D_circle) k,     k = 0.001 m/mm
+
+and scales it onto a plane of size (W_plane, H_plane) by S = min(W_plane / W_pat,
+H_plane / H_pat), so every length D (mm) becomes D_sim = D k S in the scene. ``H_pat``
+ignores the half-spacing shift of odd columns, so the circles reach ``D_centers / 4`` into
+the top and bottom borders; :class:`CircleBoard` checks that every circle stays on the plane.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from virtus.checks import as_float_array, positive, positive_int
+from virtus.errors import InputError
+
+#: metres per millimetre, the paper's ``k``.
+MM = 1e-3
+
+#: the paper's example boards (rows, cols) with the defaults used here for them.
+PAPER_BOARDS = ("4x7", "5x9", "7x13")
+
+
+@dataclass(frozen=True)
+class CircleBoard:
+    """An asymmetric circle grid printed on a rectangular plane.
+
+    Parameters
+    ----------
+    rows : circles per column (R, >= 2).
+    cols : number of columns (C, >= 3); the columns alternate between two heights.
+    circle_diameter_mm : D_circle of the printed pattern, millimetres.
+    center_distance_mm : D_centers, distance between neighbouring circles of one column, mm.
+    border_mm : L_b, the white border of the printed pattern, mm.
+    plane_size_m : (width, height) of the plane in the scene, metres.
+    circle_level, background_level : texture values (albedo factors in [0, 1]) of the circles
+        and of the paper. Dark grey rather than black circles keep the fringe modulation
+        inside the circles high enough to decode the phase there (0.25 keeps a 4:1
+        contrast, ample for blob detection).
+    """
+
+    rows: int = 7
+    cols: int = 13
+    circle_diameter_mm: float = 20.0
+    center_distance_mm: float = 40.0
+    border_mm: float = 20.0
+    plane_size_m: tuple[float, float] = (0.2, 0.2)
+    circle_level: float = 0.25
+    background_level: float = 1.0
+
+    def __post_init__(self) -> None:
+        positive_int("rows", self.rows, 2)
+        positive_int("cols", self.cols, 3)
+        positive("circle_diameter_mm", self.circle_diameter_mm)
+        positive("center_distance_mm", self.center_distance_mm)
+        if self.border_mm < 0:
+            raise InputError("border_mm", "a number >= 0", self.border_mm)
+        size = as_float_array("plane_size_m", self.plane_size_m, (2,))
+        if (size <= 0).any():
+            raise InputError("plane_size_m", "two positive lengths (m)", self.plane_size_m)
+        object.__setattr__(self, "plane_size_m", (float(size[0]), float(size[1])))
+        for name in ("circle_level", "background_level"):
+            value = getattr(self, name)
+            if not 0.0 <= value <= 1.0:
+                raise InputError(name, "a value in [0, 1]", value)
+        if self.circle_level >= self.background_level:
+            raise InputError(
+                "circle_level",
+                f"a value below background_level={self.background_level}",
+                self.circle_level,
+            )
+        # Neighbouring circles (one column apart) are D_centers / sqrt(2) apart.
+        if self.circle_diameter_mm >= self.center_distance_mm / np.sqrt(2.0):
+            raise InputError(
+                "circle_diameter_mm",
+                f"less than center_distance_mm / sqrt(2) = {self.center_distance_mm / 2**0.5:.3g}"
+                " (circles would touch)",
+                self.circle_diameter_mm,
+            )
+        half_w, half_h = 0.5 * size
+        extent = np.abs(self.object_points[:, :2]).max(axis=0) + 0.5 * self.circle_diameter_m
+        if extent[0] > half_w or extent[1] > half_h:
+            raise InputError("plane_size_m", "a plane that holds every circle", self.plane_size_m)
+
+    # -- the paper's scale equations -------------------------------------------------------
+    @property
+    def pattern_size_m(self) -> tuple[float, float]:
+        """(W_pat, H_pat): the printed pattern's size in metres (paper's equations, k=0.001)."""
+        w = 2 * self.border_mm + (self.cols - 1) * self.center_distance_mm / 2
+        h = 2 * self.border_mm + (self.rows - 1) * self.center_distance_mm
+        return ((w + self.circle_diameter_mm) * MM, (h + self.circle_diameter_mm) * MM)
+
+    @property
+    def scale(self) -> float:
+        """S = min(W_plane / W_pat, H_plane / H_pat), dimensionless."""
+        w_pat, h_pat = self.pattern_size_m
+        return min(self.plane_size_m[0] / w_pat, self.plane_size_m[1] / h_pat)
+
+    @property
+    def circle_diameter_m(self) -> float:
+        """D_circle^sim = D_circle k S, metres in the scene."""
+        return self.circle_diameter_mm * MM * self.scale
+
+    @property
+    def center_distance_m(self) -> float:
+        """D_centers^sim = D_centers k S, metres in the scene."""
+        return self.center_distance_mm * MM * self.scale
+
+    # -- geometry --------------------------------------------------------------------------
+    @property
+    def n_points(self) -> int:
+        """Number of circles, R * C."""
+        return self.rows * self.cols
+
+    @property
+    def pattern_shape(self) -> tuple[int, int]:
+        """``patternSize`` for ``cv2.findCirclesGrid`` (points per grid row, grid rows).
+
+        OpenCV's asymmetric grid has rows ``s`` apart holding points ``2 s`` apart; here
+        those are the board's columns (C of them) holding R circles each.
+        """
+        return (self.rows, self.cols)
+
+    @property
+    def object_points(self) -> np.ndarray:
+        """Circle centres, (R*C, 3) float64, metres, board frame, z = 0.
+
+        Ordered column by column (left to right along +x), each column top to bottom
+        (along +y): index ``j * R + i`` is circle ``i`` of column ``j``.
+        """
+        half = 0.5 * self.center_distance_m
+        j, i = np.meshgrid(np.arange(self.cols), np.arange(self.rows), indexing="ij")
+        x = j * half
+        y = (2 * i + (j % 2)) * half
+        points = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=1)
+        # Centre the grid on the plane's origin.
+        points[:, 0] -= 0.5 * (self.cols - 1) * half
+        points[:, 1] -= 0.5 * (2 * (self.rows - 1) + 1) * half
+        return points
+
+    @property
+    def plane_corners(self) -> np.ndarray:
+        """Corners of the plane, (4, 3) float64, metres, board frame (z = 0)."""
+        w, h = 0.5 * np.asarray(self.plane_size_m)
+        return np.array([[-w, -h, 0.0], [w, -h, 0.0], [w, h, 0.0], [-w, h, 0.0]])
+
+    def circle_outline(self, n: int = 64) -> np.ndarray:
+        """Points on every circle's edge, (R*C, n, 3) float64, metres, board frame."""
+        angle = np.linspace(0.0, 2.0 * np.pi, positive_int("n", n, 8), endpoint=False)
+        r = 0.5 * self.circle_diameter_m
+        ring = np.stack([r * np.cos(angle), r * np.sin(angle), np.zeros(n)], axis=1)
+        return self.object_points[:, None, :] + ring[None, :, :]
+
+    # -- texture ---------------------------------------------------------------------------
+    def texture(
+        self, pixel_size_m: float = 1e-4, supersample: int = 4, blur_m: float = 0.0
+    ) -> np.ndarray:
+        """Draw the board as an albedo texture covering the whole plane.
+
+        Parameters
+        ----------
+        pixel_size_m : texel size, metres (the default 0.1 mm is about a quarter of a
+            camera pixel at 1 m for the default rig).
+        supersample : each texel is the mean of ``supersample**2`` point samples of the
+            circles, so edges are anti-aliased without shifting any circle's centroid.
+        blur_m : standard deviation (metres, board plane) of a Gaussian that softens the
+            circle edges, like a slightly defocused lens. A symmetric blur keeps every
+            circle's centroid; a soft edge lets a renderer with few samples per pixel
+            (4 spp) integrate it accurately.
+
+        Returns
+        -------
+        (H, W) float32 array in [0, 1]; rows along the board's +y, columns along +x, its
+        centre at the board origin (as ``virtus.scene.TexturedPlaneObject`` expects).
+        """
+        pixel = positive("pixel_size_m", pixel_size_m)
+        ss = positive_int("supersample", supersample)
+        width = int(np.ceil(self.plane_size_m[0] / pixel))
+        height = int(np.ceil(self.plane_size_m[1] / pixel))
+        # Texel centres span the plane exactly (texel size adjusted per axis).
+        step_x = self.plane_size_m[0] / width
+        step_y = self.plane_size_m[1] / height
+        coverage = np.zeros((height, width), dtype=np.float64)
+        radius = 0.5 * self.circle_diameter_m
+        offsets = (np.arange(ss) + 0.5) / ss - 0.5
+        for cx, cy, _ in self.object_points:
+            # Texel index range touching this circle.
+            c0 = max(int(np.floor((cx - radius) / step_x + 0.5 * width)) - 1, 0)
+            c1 = min(int(np.ceil((cx + radius) / step_x + 0.5 * width)) + 1, width)
+            r0 = max(int(np.floor((cy - radius) / step_y + 0.5 * height)) - 1, 0)
+            r1 = min(int(np.ceil((cy + radius) / step_y + 0.5 * height)) + 1, height)
+            cols = np.arange(c0, c1)
+            rows = np.arange(r0, r1)
+            xs = (cols[:, None] + 0.5 + offsets[None, :]) * step_x - 0.5 * self.plane_size_m[0]
+            ys = (rows[:, None] + 0.5 + offsets[None, :]) * step_y - 0.5 * self.plane_size_m[1]
+            dx2 = (xs - cx) ** 2  # (ncols, ss)
+            dy2 = (ys - cy) ** 2  # (nrows, ss)
+            inside = dy2[:, None, :, None] + dx2[None, :, None, :] <= radius**2
+            coverage[r0:r1, c0:c1] += inside.mean(axis=(2, 3))
+        if blur_m < 0:
+            raise InputError("blur_m", "a standard deviation >= 0 (m)", blur_m)
+        if blur_m > 0:
+            import cv2
+
+            coverage = cv2.GaussianBlur(
+                coverage,
+                (0, 0),
+                sigmaX=blur_m / step_x,
+                sigmaY=blur_m / step_y,
+                borderType=cv2.BORDER_REPLICATE,
+            )
+        levels = self.background_level + (self.circle_level - self.background_level) * coverage
+        return levels.astype(np.float32)
+
+    # -- description -----------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        """Plain description (JSON-ready), with the derived scene sizes in metres."""
+        return {
+            "type": "asymmetric_circles",
+            "rows": self.rows,
+            "cols": self.cols,
+            "circle_diameter_mm": self.circle_diameter_mm,
+            "center_distance_mm": self.center_distance_mm,
+            "border_mm": self.border_mm,
+            "plane_size_m": list(self.plane_size_m),
+            "circle_level": self.circle_level,
+            "background_level": self.background_level,
+            "scale": self.scale,
+            "circle_diameter_m": self.circle_diameter_m,
+            "center_distance_m": self.center_distance_m,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict) -> CircleBoard:
+        """Inverse of :meth:`to_dict` (derived keys are ignored)."""
+        keys = (
+            "rows",
+            "cols",
+            "circle_diameter_mm",
+            "center_distance_mm",
+            "border_mm",
+            "plane_size_m",
+            "circle_level",
+            "background_level",
+        )
+        try:
+            return cls(**{k: data[k] for k in keys if k in data})
+        except TypeError as error:
+            raise InputError("board", "a board description", data) from error
+
+
+def board_from_spec(
+    spec: str | CircleBoard, plane_size_m: tuple[float, float] | None = None
+) -> CircleBoard:
+    """Build a board from ``"ROWSxCOLS"`` (e.g. ``"4x7"``) or return a given board.
+
+    The printed pattern keeps the default proportions (D_circle = D_centers / 2, border =
+    D_centers / 2); the paper's scale equations then fit it onto the plane
+    (default 0.2 m x 0.2 m, which keeps every paper pose inside the common field of the
+    default rig).
+    """
+    if isinstance(spec, CircleBoard):
+        return spec
+    match = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", str(spec))
+    if match is None:
+        raise InputError("board", "'ROWSxCOLS', e.g. '4x7'", spec)
+    rows, cols = int(match.group(1)), int(match.group(2))
+    size = (0.2, 0.2) if plane_size_m is None else plane_size_m
+    return CircleBoard(rows=rows, cols=cols, plane_size_m=size)

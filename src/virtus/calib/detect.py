@@ -1,0 +1,207 @@
+"""Circle-grid detection in camera images and sub-pixel refinement of the circle centres.
+
+:func:`find_grid` finds and orders the circles with OpenCV's asymmetric circle-grid
+detector (a :class:`cv2.SimpleBlobDetector` sized for large circles) and puts them in the
+order of :attr:`CircleBoard.object_points`. :func:`refine_centres` replaces each centre by
+the centroid of the circle's darkness, ``w = 1 - I / B`` with the local background ``B``
+fitted on a ring around the circle: this is the area centroid of the circle's image,
+insensitive to smooth illumination gradients and sub-pixel accurate on anti-aliased
+images. The area centroid of an ellipse seen in perspective is *not* the image of the
+circle's centre; :mod:`virtus.calib.solve` corrects that bias with the calibrated model.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from virtus.calib.board import CircleBoard
+from virtus.checks import as_float_array, as_points
+
+#: Darkness window around each circle, as fractions of D_centers in the board plane: the
+#: circle plus this margin (its blurred edge: ~3 px at 1 m for the 7x13 default board) ...
+_INNER_MARGIN = 0.05
+#: ... and the background ring beyond it stops this far short of the neighbouring circle.
+_RING_GAP = 0.04
+#: Smallest blob area in px^2 (rejects specks) for the blob detector.
+_MIN_BLOB_AREA_PX = 12.0
+
+
+def _to_uint8(image: np.ndarray) -> np.ndarray:
+    """8-bit view of an image for OpenCV's detector (floats are scaled by their 99.9th pct)."""
+    if image.dtype == np.uint8:
+        return image
+    image = np.asarray(image, dtype=np.float64)
+    top = np.nanpercentile(image, 99.9)
+    scale = 255.0 / top if top > 0 else 1.0
+    return np.clip(np.nan_to_num(image) * scale, 0, 255).astype(np.uint8)
+
+
+def blob_detector(image_shape: tuple[int, int]) -> cv2.SimpleBlobDetector:
+    """Blob detector for dark circles from a dozen px^2 up to 5 % of the image area.
+
+    OpenCV's default ``maxArea`` (5000 px^2) misses circles wider than about 80 px, a common
+    failure with boards close to the camera.
+    """
+    params = cv2.SimpleBlobDetector_Params()
+    params.filterByColor = True
+    params.blobColor = 0
+    params.filterByArea = True
+    params.minArea = _MIN_BLOB_AREA_PX
+    params.maxArea = 0.05 * float(image_shape[0] * image_shape[1])
+    params.minThreshold = 10
+    params.maxThreshold = 240
+    params.thresholdStep = 10
+    params.minDistBetweenBlobs = 3.0
+    # Ellipses of boards tilted by up to ~60 deg stay well above these.
+    params.filterByCircularity = True
+    params.minCircularity = 0.6
+    params.filterByInertia = True
+    params.minInertiaRatio = 0.2
+    params.filterByConvexity = True
+    params.minConvexity = 0.9
+    return cv2.SimpleBlobDetector_create(params)
+
+
+def _order_candidates(board: CircleBoard) -> list[np.ndarray]:
+    """Index permutations mapping OpenCV's ordering onto ours (grid flips)."""
+    idx = np.arange(board.n_points).reshape(board.cols, board.rows)
+    return [
+        idx,
+        idx[::-1, :],
+        idx[:, ::-1],
+        idx[::-1, ::-1],
+        idx.ravel()[::-1].reshape(board.cols, board.rows),
+    ]
+
+
+def _homography(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """Least-squares homography (3, 3) mapping src (N, 2) to dst (N, 2)."""
+    H, _ = cv2.findHomography(src.astype(np.float64), dst.astype(np.float64), 0)
+    return H
+
+
+def _apply_h(H: np.ndarray, points: np.ndarray) -> np.ndarray:  # noqa: N803
+    p = np.column_stack([points, np.ones(len(points))]) @ H.T
+    return p[:, :2] / p[:, 2:3]
+
+
+def order_to_board(board: CircleBoard, centres: np.ndarray) -> np.ndarray | None:
+    """Reorder detected centres (OpenCV's order) into ``board.object_points`` order.
+
+    Among the grid flips, keep the one whose board-to-image homography fits best and keeps
+    the board's handedness (the printed face seen from the front: positive Jacobian).
+    Returns ``None`` if none fits (a detection that is not this board).
+    """
+    obj = board.object_points[:, :2]
+    best, best_rms = None, np.inf
+    for candidate in _order_candidates(board):
+        ordered = np.empty_like(centres)
+        ordered[candidate.ravel()] = centres
+        H = _homography(obj, ordered)  # noqa: N806
+        if H is None:
+            continue
+        rms = np.sqrt(np.mean(np.sum((_apply_h(H, obj) - ordered) ** 2, axis=1)))
+        # Jacobian determinant of the homography at the board centre.
+        h = H / H[2, 2]
+        jac = np.linalg.det(h[:2, :2] - np.outer(h[:2, 2], h[2, :2]))
+        if jac > 0 and rms < best_rms:
+            best, best_rms = ordered, rms
+    spacing_px = np.median(np.linalg.norm(np.diff(centres, axis=0), axis=1))
+    if best is None or best_rms > 0.1 * spacing_px:
+        return None
+    return best
+
+
+def find_grid(image: np.ndarray, board: CircleBoard) -> np.ndarray | None:
+    """Detect the board's circles in a camera image.
+
+    Parameters
+    ----------
+    image : (H, W) uint8 or float image (dark circles on a bright board).
+    board : the board (its ``pattern_shape`` and geometry).
+
+    Returns
+    -------
+    (R*C, 2) float64 pixel centres (u, v) in ``board.object_points`` order, or ``None`` if
+    the whole grid was not found.
+    """
+    image = np.asarray(image)
+    if image.ndim != 2:
+        as_float_array("image", image, (None, None))
+    gray = _to_uint8(image)
+    found, centres = cv2.findCirclesGrid(
+        gray,
+        board.pattern_shape,
+        flags=cv2.CALIB_CB_ASYMMETRIC_GRID,
+        blobDetector=blob_detector(gray.shape),
+    )
+    if not found or centres is None or len(centres) != board.n_points:
+        return None
+    return order_to_board(board, centres.reshape(-1, 2).astype(np.float64))
+
+
+def _window_radii(board: CircleBoard) -> tuple[float, float]:
+    """Inner (circle) and outer (background ring) radii in the board plane, metres."""
+    d = board.center_distance_m
+    r_circle = 0.5 * board.circle_diameter_m
+    r_in = r_circle + _INNER_MARGIN * d
+    r_out = d / np.sqrt(2.0) - r_circle - _RING_GAP * d
+    # Stay on the plane for the outer circles.
+    hw = 0.5 * np.asarray(board.plane_size_m)
+    to_edge = np.min(hw[None, :] - np.abs(board.object_points[:, :2]))
+    r_out = min(r_out, to_edge - _RING_GAP * d)
+    return r_in, r_out
+
+
+def refine_centres(image: np.ndarray, board: CircleBoard, centres: np.ndarray) -> np.ndarray:
+    """Sub-pixel area centroids of the circles' images.
+
+    Parameters
+    ----------
+    image : (H, W) uint8 or float camera image under uniform illumination.
+    board : the board.
+    centres : (R*C, 2) float64 approximate centres (u, v) px in board order.
+
+    Returns
+    -------
+    (R*C, 2) float64 centroids (u, v) px; NaN for a circle whose window leaves the image or
+    whose background ring is too dark to normalise by.
+    """
+    img = np.asarray(image, dtype=np.float64)
+    centres = as_points("centres", centres, 2)
+    obj = board.object_points[:, :2]
+    H = _homography(obj, centres)  # noqa: N806  board (m) -> image (px)
+    H_inv = np.linalg.inv(H)  # noqa: N806
+    r_in, r_out = _window_radii(board)
+    ring = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+    circle = np.stack([np.cos(ring), np.sin(ring)], axis=1)
+    out = np.full_like(centres, np.nan)
+    height, width = img.shape
+    for k, centre in enumerate(obj):
+        outline = _apply_h(H, centre + r_out * circle)
+        lo = np.floor(outline.min(axis=0)).astype(int) - 1
+        hi = np.ceil(outline.max(axis=0)).astype(int) + 1
+        if lo.min() < 0 or hi[0] >= width or hi[1] >= height:
+            continue
+        vv, uu = np.mgrid[lo[1] : hi[1] + 1, lo[0] : hi[0] + 1]
+        pix = np.stack([uu.ravel(), vv.ravel()], axis=1).astype(np.float64)
+        rho = np.linalg.norm(_apply_h(H_inv, pix) - centre, axis=1)
+        values = img[vv.ravel(), uu.ravel()]
+        inner = rho <= r_in
+        bg = (rho > r_in) & (rho <= r_out)
+        if bg.sum() < 12:
+            continue
+        # Quadratic background model in pixel offsets from the centre.
+        d = pix - centres[k]
+        design = np.column_stack([np.ones(len(d)), d, d * d, d[:, :1] * d[:, 1:]])
+        coef, *_ = np.linalg.lstsq(design[bg], values[bg], rcond=None)
+        background = design[inner] @ coef
+        if np.any(background <= 0.05 * np.max(background)):
+            continue
+        weight = 1.0 - values[inner] / background
+        total = weight.sum()
+        if total <= 0:
+            continue
+        out[k] = (weight[:, None] * pix[inner]).sum(axis=0) / total
+    return out

@@ -1,0 +1,109 @@
+"""Projector "images" of the circle centres, read from the decoded projector coordinates.
+
+The projector cannot see, so its image of a circle centre is the projector pixel that lights
+that centre: the decoded ``(u_p, v_p)`` at the camera pixel where the centre is imaged.
+Reading the map at one pixel would inherit the decoding's local errors (the projector's
+pixel staircase, low modulation inside the dark circles), so, as Moreno & Taubin (2012,
+"Simple, accurate, and robust projector-camera calibration"), a local homography camera px
+-> projector px is fitted to every valid decoded pixel in a neighbourhood of the centre
+(the board is planar, so the map is a homography up to lens distortion) and evaluated at
+the centre. Hundreds of pixels average the staircase out to a few thousandths of a pixel.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from virtus.calib.board import CircleBoard
+from virtus.calib.detect import _apply_h, _homography, _window_radii
+from virtus.checks import as_float_array, as_points
+from virtus.errors import InputError
+
+#: A neighbourhood needs this fraction of valid decoded pixels, else the centre is NaN.
+MIN_VALID_FRACTION = 0.5
+#: RANSAC threshold (projector px) that rejects gross decoding errors before the LS fit.
+_RANSAC_PX = 1.0
+
+
+def local_homographies(
+    proj_uv: np.ndarray, board: CircleBoard, cam_centres: np.ndarray
+) -> np.ndarray:
+    """Fit one camera px -> projector px homography around every circle.
+
+    Parameters
+    ----------
+    proj_uv : (H, W, 2) float, decoded projector coordinates (u_p, v_p) per camera pixel,
+        NaN where invalid.
+    board : the board (sets the neighbourhood: the circle and the ring around it, as
+        :func:`virtus.calib.detect.refine_centres`).
+    cam_centres : (N, 2) float64 approximate camera pixels (u, v) of the circle centres,
+        board order; they place the neighbourhoods.
+
+    Returns
+    -------
+    (N, 3, 3) float64 homographies mapping homogeneous camera pixels (u, v, 1) to projector
+    pixels; all-NaN for a circle with too few valid decoded pixels around it. Keeping the
+    homographies (not the maps) lets the caller evaluate them at bias-corrected centres
+    later, after the camera is calibrated.
+    """
+    uv = as_float_array("proj_uv", proj_uv, (None, None, 2), allow_nan=True)
+    anchors = as_points("cam_centres", cam_centres, 2)
+    obj = board.object_points[:, :2]
+    H = _homography(obj, anchors)  # noqa: N806  board (m) -> camera px
+    H_inv = np.linalg.inv(H)  # noqa: N806
+    _, r_out = _window_radii(board)
+    ring = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+    circle = np.stack([np.cos(ring), np.sin(ring)], axis=1)
+    height, width = uv.shape[:2]
+    out = np.full((len(anchors), 3, 3), np.nan)
+    for k, centre in enumerate(obj):
+        outline = _apply_h(H, centre + r_out * circle)
+        lo = np.maximum(np.floor(outline.min(axis=0)).astype(int), 0)
+        hi = np.minimum(np.ceil(outline.max(axis=0)).astype(int), (width - 1, height - 1))
+        if (hi < lo).any():
+            continue
+        vv, uu = np.mgrid[lo[1] : hi[1] + 1, lo[0] : hi[0] + 1]
+        pix = np.stack([uu.ravel(), vv.ravel()], axis=1).astype(np.float64)
+        inside = np.linalg.norm(_apply_h(H_inv, pix) - centre, axis=1) <= r_out
+        target = uv[vv.ravel(), uu.ravel()]
+        valid = inside & np.isfinite(target).all(axis=1)
+        need = max(MIN_VALID_FRACTION * inside.sum(), 16)
+        if valid.sum() < need:
+            continue
+        # Offsets from the anchor keep the fit well conditioned.
+        src = pix[valid] - anchors[k]
+        dst = target[valid]
+        local, mask = cv2.findHomography(src, dst, cv2.RANSAC, _RANSAC_PX)
+        if local is None:
+            continue
+        keep = mask.ravel().astype(bool)
+        if keep.sum() < need:
+            continue
+        local = _homography(src[keep], dst[keep])
+        if local is None:
+            continue
+        shift = np.array([[1.0, 0.0, -anchors[k, 0]], [0.0, 1.0, -anchors[k, 1]], [0, 0, 1]])
+        out[k] = local @ shift
+    return out
+
+
+def apply_homographies(homographies: np.ndarray, cam_points: np.ndarray) -> np.ndarray:
+    """Evaluate per-circle homographies (N, 3, 3) at camera pixels (N, 2) -> (N, 2) projector px.
+
+    NaN homographies give NaN rows.
+    """
+    hs = as_float_array("homographies", homographies, (None, 3, 3), allow_nan=True)
+    points = as_points("cam_points", cam_points, 2)
+    if len(hs) != len(points):
+        raise InputError("cam_points", f"{len(hs)} points (one per homography)", len(points))
+    p = np.einsum("nij,nj->ni", hs, np.column_stack([points, np.ones(len(points))]))
+    return p[:, :2] / p[:, 2:3]
+
+
+def projector_points(proj_uv: np.ndarray, board: CircleBoard, cam_points: np.ndarray) -> np.ndarray:
+    """Projector pixels (N, 2) of the circle centres imaged at ``cam_points`` (N, 2) px.
+
+    Shorthand for :func:`local_homographies` followed by :func:`apply_homographies`.
+    """
+    return apply_homographies(local_homographies(proj_uv, board, cam_points), cam_points)

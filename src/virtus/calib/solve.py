@@ -1,0 +1,292 @@
+"""Camera, projector and stereo calibration from per-pose circle observations.
+
+Pipeline (:func:`calibrate_observations`):
+
+1. Camera: Zhang's method (``cv2.calibrateCamera``) on the refined circle centroids, with
+   k1, k2, p1, p2 estimated and k3 fixed at 0 (a user does not know the true lens; the
+   truth comparison shows how close the estimate gets).
+2. Perspective bias: the area centroid of a circle's image is not the image of its centre.
+   With the calibrated camera and each pose's board pose, the bias is computed exactly
+   (centroid of the projected, distorted outline minus the projected centre), subtracted
+   from the centroids, and the camera recalibrated; repeated :data:`BIAS_ITERATIONS` times.
+3. Projector: each circle's local camera->projector homography is evaluated at its
+   corrected camera centre, and the projector calibrated like a camera.
+4. Stereo: ``cv2.stereoCalibrate`` refines both devices and their relative pose jointly
+   (measured better than ``CALIB_FIX_INTRINSIC`` here). OpenCV's ``R, T`` map camera-frame
+   points into the projector frame (``cam2proj``); the result stores ``proj2cam``.
+
+Poses whose circles are not all observed by both devices are dropped with a warning naming
+them, as are poses whose reprojection error is an outlier; fewer than
+:data:`MIN_POSES` usable poses raise :class:`VirtusError`.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from virtus.calib.board import CircleBoard
+from virtus.calib.projector import apply_homographies
+from virtus.errors import VirtusError
+from virtus.optics import Camera, Intrinsics, Pose, Projector, Rig
+
+#: Fewest usable poses for a calibration (Zhang's method needs 3 views of a plane).
+MIN_POSES = 3
+#: Bias-correction passes (the second changes centres by < 1e-4 px on the paper's poses).
+BIAS_ITERATIONS = 2
+#: A pose whose RMS reprojection error exceeds this multiple of the median (and
+#: :data:`OUTLIER_FLOOR_PX`) is reported as an outlier and dropped.
+OUTLIER_FACTOR = 5.0
+OUTLIER_FLOOR_PX = 0.1
+#: OpenCV flags: estimate k1, k2, p1, p2; keep k3 = 0.
+CALIB_FLAGS = cv2.CALIB_FIX_K3
+_CRITERIA = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 200, 1e-15)
+#: Outline samples per circle for the perspective-bias computation (polygon centroid error
+#: falls as 1/n^2: 256 samples are below 1e-6 px).
+_OUTLINE_SAMPLES = 256
+
+
+@dataclass
+class PoseObservation:
+    """What one board pose gave.
+
+    Attributes
+    ----------
+    name : the pose's name.
+    cam_centroids : (N, 2) float64 circle area centroids (u, v) px in the camera image,
+        board order; ``None`` if the board was not detected.
+    homographies : (N, 3, 3) float64 local camera px -> projector px homographies (NaN
+        where the phase was not usable); ``None`` if not available.
+    """
+
+    name: str
+    cam_centroids: np.ndarray | None
+    homographies: np.ndarray | None
+
+    def problem(self) -> str | None:
+        """Why this pose cannot be used (``None`` if it can)."""
+        if self.cam_centroids is None:
+            return "the camera did not detect the whole board"
+        if not np.isfinite(self.cam_centroids).all():
+            missing = int((~np.isfinite(self.cam_centroids).all(axis=1)).sum())
+            return f"{missing} circle centre(s) could not be refined in the camera image"
+        if self.homographies is None:
+            return "no decoded projector coordinates"
+        bad = ~np.isfinite(self.homographies).all(axis=(1, 2))
+        if bad.any():
+            return f"the projector did not see {int(bad.sum())} circle(s) (phase invalid)"
+        return None
+
+
+@dataclass
+class DeviceCalibration:
+    """One device's calibration: intrinsics, RMS (px) overall and per pose, board poses."""
+
+    intrinsics: Intrinsics
+    rms_px: float
+    per_pose_rms_px: np.ndarray
+    board2device: list[Pose]
+
+
+@dataclass
+class StereoCalibration:
+    """The solved rig plus its errors."""
+
+    rig: Rig
+    camera: DeviceCalibration
+    projector: DeviceCalibration
+    stereo_rms_px: float
+    per_pose: list[dict]
+    used_poses: list[str]
+    dropped_poses: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def rms_px(self) -> dict[str, float]:
+        return {
+            "camera": self.camera.rms_px,
+            "projector": self.projector.rms_px,
+            "stereo": self.stereo_rms_px,
+        }
+
+
+def _cv_points(points: list[np.ndarray], dim: int) -> list[np.ndarray]:
+    return [np.ascontiguousarray(p, dtype=np.float32).reshape(-1, 1, dim) for p in points]
+
+
+def calibrate_device(
+    object_points: np.ndarray,
+    image_points: list[np.ndarray],
+    size: tuple[int, int],
+    flags: int = CALIB_FLAGS,
+) -> DeviceCalibration:
+    """Zhang calibration of one device (camera, or projector as an inverse camera).
+
+    Parameters
+    ----------
+    object_points : (N, 3) float64 circle centres, metres, board frame.
+    image_points : per pose, (N, 2) float64 pixels (u, v) of the same circles.
+    size : (width, height) of the device's image, px.
+    flags : OpenCV calibration flags (default: k1, k2, p1, p2 estimated, k3 fixed).
+    """
+    objs = _cv_points([object_points] * len(image_points), 3)
+    imgs = _cv_points(image_points, 2)
+    rms, K, dist, rvecs, tvecs, _, _, per_view = cv2.calibrateCameraExtended(  # noqa: N806
+        objs, imgs, size, None, None, flags=flags, criteria=_CRITERIA
+    )
+    intrinsics = Intrinsics.from_opencv(K, dist.ravel()[:5], size[0], size[1])
+    poses = [Pose.from_rotvec(r.ravel(), t.ravel()) for r, t in zip(rvecs, tvecs, strict=True)]
+    return DeviceCalibration(intrinsics, float(rms), per_view.ravel().copy(), poses)
+
+
+def centroid_bias(intrinsics: Intrinsics, board: CircleBoard, board2device: Pose) -> np.ndarray:
+    """Area centroid of each circle's image minus the image of its centre, (N, 2) px.
+
+    The outline is projected with the device's distortion; the centroid is that of the
+    projected polygon (shoelace formula), which is what :func:`refine_centres` measures.
+    """
+    outline = board.circle_outline(_OUTLINE_SAMPLES)
+    n, m, _ = outline.shape
+    uv = intrinsics.project(board2device.apply(outline.reshape(-1, 3))).reshape(n, m, 2)
+    x, y = uv[..., 0], uv[..., 1]
+    x1, y1 = np.roll(x, -1, axis=1), np.roll(y, -1, axis=1)
+    cross = x * y1 - x1 * y
+    area = 0.5 * cross.sum(axis=1)
+    centroid = np.stack(
+        [((x + x1) * cross).sum(axis=1), ((y + y1) * cross).sum(axis=1)], axis=1
+    ) / (6.0 * area[:, None])
+    centre = intrinsics.project(board2device.apply(board.object_points))
+    return centroid - centre
+
+
+def _stereo(
+    object_points: np.ndarray,
+    cam_points: list[np.ndarray],
+    proj_points: list[np.ndarray],
+    camera: DeviceCalibration,
+    projector: DeviceCalibration,
+    fix_intrinsics: bool,
+) -> tuple[Intrinsics, Intrinsics, Pose, float, np.ndarray]:
+    cam_k, cam_d = camera.intrinsics.to_opencv()
+    proj_k, proj_d = projector.intrinsics.to_opencv()
+    flags = (
+        cv2.CALIB_FIX_INTRINSIC if fix_intrinsics else (cv2.CALIB_USE_INTRINSIC_GUESS | CALIB_FLAGS)
+    )
+    objs = _cv_points([object_points] * len(cam_points), 3)
+    size = (camera.intrinsics.width, camera.intrinsics.height)
+    result = cv2.stereoCalibrateExtended(
+        objs,
+        _cv_points(cam_points, 2),
+        _cv_points(proj_points, 2),
+        cam_k.copy(),
+        cam_d.copy(),
+        proj_k.copy(),
+        proj_d.copy(),
+        size,
+        np.eye(3),
+        np.zeros((3, 1)),
+        flags=flags,
+        criteria=_CRITERIA,
+    )
+    rms, k1, d1, k2, d2, R, T = result[:7]  # noqa: N806
+    per_view = result[-1]
+    cam = Intrinsics.from_opencv(
+        k1, d1.ravel()[:5], camera.intrinsics.width, camera.intrinsics.height
+    )
+    proj = Intrinsics.from_opencv(
+        k2, d2.ravel()[:5], projector.intrinsics.width, projector.intrinsics.height
+    )
+    cam2proj = Pose(R, T.ravel())
+    return cam, proj, cam2proj.inverse(), float(rms), np.asarray(per_view).reshape(-1, 2)
+
+
+def _solve(
+    board: CircleBoard,
+    observations: list[PoseObservation],
+    camera_size: tuple[int, int],
+    projector_size: tuple[int, int],
+    fix_intrinsics: bool,
+) -> StereoCalibration:
+    obj = board.object_points
+    raw = [o.cam_centroids for o in observations]
+    cam_points = list(raw)
+    camera = calibrate_device(obj, cam_points, camera_size)
+    for _ in range(BIAS_ITERATIONS):
+        cam_points = [
+            r - centroid_bias(camera.intrinsics, board, pose)
+            for r, pose in zip(raw, camera.board2device, strict=True)
+        ]
+        camera = calibrate_device(obj, cam_points, camera_size)
+    proj_points = [
+        apply_homographies(o.homographies, c) for o, c in zip(observations, cam_points, strict=True)
+    ]
+    projector = calibrate_device(obj, proj_points, projector_size)
+    cam_i, proj_i, proj2cam, rms, per_view = _stereo(
+        obj, cam_points, proj_points, camera, projector, fix_intrinsics
+    )
+    rig = Rig(Camera(cam_i), Projector(proj_i), proj2cam)
+    per_pose = [
+        {
+            "name": o.name,
+            "camera_rms_px": float(camera.per_pose_rms_px[k]),
+            "projector_rms_px": float(projector.per_pose_rms_px[k]),
+            "stereo_camera_rms_px": float(per_view[k, 0]),
+            "stereo_projector_rms_px": float(per_view[k, 1]),
+            "board2cam": camera.board2device[k].to_dict(),
+        }
+        for k, o in enumerate(observations)
+    ]
+    return StereoCalibration(rig, camera, projector, rms, per_pose, [o.name for o in observations])
+
+
+def calibrate_observations(
+    board: CircleBoard,
+    observations: list[PoseObservation],
+    camera_size: tuple[int, int],
+    projector_size: tuple[int, int],
+    *,
+    fix_intrinsics: bool = False,
+) -> StereoCalibration:
+    """Calibrate camera, projector and their relative pose from per-pose observations.
+
+    Parameters
+    ----------
+    board : the board whose :attr:`~CircleBoard.object_points` were observed.
+    observations : one per pose; unusable ones are dropped with a warning naming them.
+    camera_size, projector_size : (width, height) px.
+    fix_intrinsics : keep the single-device intrinsics in the stereo step
+        (``CALIB_FIX_INTRINSIC``) instead of refining everything jointly.
+
+    Raises
+    ------
+    VirtusError : fewer than :data:`MIN_POSES` usable poses.
+    """
+    dropped: dict[str, str] = {}
+    usable = []
+    for obs in observations:
+        problem = obs.problem()
+        if problem is None:
+            usable.append(obs)
+        else:
+            dropped[obs.name] = problem
+            warnings.warn(f"calibration: pose {obs.name!r} dropped: {problem}", stacklevel=2)
+    while True:
+        if len(usable) < MIN_POSES:
+            raise VirtusError(
+                f"calibration needs at least {MIN_POSES} usable poses, got {len(usable)}"
+                + (f" (dropped: {', '.join(dropped)})" if dropped else "")
+            )
+        result = _solve(board, usable, camera_size, projector_size, fix_intrinsics)
+        errors = np.array([max(p["camera_rms_px"], p["projector_rms_px"]) for p in result.per_pose])
+        limit = max(OUTLIER_FACTOR * float(np.median(errors)), OUTLIER_FLOOR_PX)
+        worst = int(np.argmax(errors))
+        if errors[worst] <= limit or len(usable) <= MIN_POSES:
+            break
+        name = usable[worst].name
+        dropped[name] = f"outlier: reprojection error {errors[worst]:.3g} px > {limit:.3g} px"
+        warnings.warn(f"calibration: pose {name!r} dropped: {dropped[name]}", stacklevel=2)
+        usable.pop(worst)
+    result.dropped_poses = dropped
+    return result
