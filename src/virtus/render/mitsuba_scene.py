@@ -1,0 +1,150 @@
+"""Turn a :class:`virtus.scene.Scene` into a Mitsuba scene description.
+
+Shapes are placed in the world frame given by their ``object2world`` poses; every BSDF is
+wrapped in ``twosided`` so that planes and open meshes reflect on both sides. Materials map
+to Mitsuba BSDFs as documented in :class:`virtus.scene.Material`.
+"""
+
+from __future__ import annotations
+
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+
+from virtus.errors import InputError
+from virtus.optics import Pose
+from virtus.scene import (
+    BoxObject,
+    Material,
+    MeshObject,
+    PlaneObject,
+    Scene,
+    SphereObject,
+    TexturedPlaneObject,
+)
+
+
+def _texture(mi: ModuleType, image: np.ndarray) -> dict[str, Any]:
+    # raw: the values are linear albedos; clamp: no wrap-around at the board's edges.
+    bitmap = mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32)[..., None])
+    return {
+        "type": "bitmap",
+        "bitmap": bitmap,
+        "raw": True,
+        "filter_type": "bilinear",
+        "wrap_mode": "clamp",
+    }
+
+
+def bsdf_dict(mi: ModuleType, material: Material, albedo: np.ndarray | None = None) -> dict:
+    """Mitsuba BSDF dict for ``material``; ``albedo`` (H, W) overrides its albedo texture."""
+    image = albedo if albedo is not None else material.albedo_image()
+    if image is not None:
+        colour: Any = _texture(mi, image)
+    else:
+        colour = {"type": "rgb", "value": [float(material.albedo)] * 3}  # type: ignore[arg-type]
+    if material.metal:
+        inner = {
+            "type": "principled",
+            "base_color": colour,
+            "metallic": 1.0,
+            "roughness": material.roughness,
+            "specular": material.specular,
+        }
+    elif material.specular == 0.0:
+        inner = {"type": "diffuse", "reflectance": colour}
+    else:
+        inner = {
+            "type": "principled",
+            "base_color": colour,
+            "metallic": 0.0,
+            "roughness": material.roughness,
+            "specular": material.specular,
+        }
+    return {"type": "twosided", "bsdf": inner}
+
+
+def _transform(mi: ModuleType, pose: Pose, scale: tuple[float, float, float]) -> Any:
+    matrix = pose.matrix @ np.diag([*scale, 1.0])
+    return mi.ScalarTransform4f(matrix.tolist())
+
+
+def _mesh(mi: ModuleType, dr: ModuleType, obj: MeshObject, name: str) -> Any:
+    vertices, faces, uv = obj.load()
+    props = mi.Properties()
+    props["bsdf"] = mi.load_dict(bsdf_dict(mi, obj.material))
+    mesh = mi.Mesh(
+        name,
+        vertex_count=len(vertices),
+        face_count=len(faces),
+        props=props,
+        has_vertex_normals=False,
+        has_vertex_texcoords=uv is not None,
+    )
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = dr.ravel(mi.Point3f(*vertices.T.astype(np.float32)))
+    params["faces"] = dr.ravel(mi.Vector3u(*faces.T.astype(np.uint32)))
+    if uv is not None:
+        params["vertex_texcoords"] = dr.ravel(mi.Point2f(*uv.T.astype(np.float32)))
+    params.update()
+    return mesh
+
+
+def shape_dict(mi: ModuleType, dr: ModuleType, obj: Any, name: str) -> Any:
+    """Mitsuba shape (dict or Mesh object) for one scene object."""
+    if isinstance(obj, SphereObject):
+        return {
+            "type": "sphere",
+            "center": list(obj.center_m),
+            "radius": obj.radius_m,
+            "bsdf": bsdf_dict(mi, obj.material),
+        }
+    if isinstance(obj, TexturedPlaneObject):
+        # Mitsuba's rectangle spans [-1, 1]^2 with uv = ((x + 1) / 2, (y + 1) / 2) and bitmap
+        # row 0 at v = 0: texture columns along +x and rows along +y, as documented.
+        width, height = obj.size_m
+        return {
+            "type": "rectangle",
+            "to_world": _transform(mi, obj.pose, (width / 2, height / 2, 1.0)),
+            "bsdf": bsdf_dict(mi, obj.material, albedo=obj.texture_image()),
+        }
+    if isinstance(obj, PlaneObject):
+        width, height = obj.size_m
+        return {
+            "type": "rectangle",
+            "to_world": _transform(mi, obj.pose, (width / 2, height / 2, 1.0)),
+            "bsdf": bsdf_dict(mi, obj.material),
+        }
+    if isinstance(obj, BoxObject):
+        x, y, z = obj.size_m
+        return {
+            "type": "cube",
+            "to_world": _transform(mi, obj.pose, (x / 2, y / 2, z / 2)),
+            "bsdf": bsdf_dict(mi, obj.material),
+        }
+    if isinstance(obj, MeshObject):
+        return _mesh(mi, dr, obj, name)
+    raise InputError(name, "a scene object", type(obj).__name__)
+
+
+def scene_dict(mi: ModuleType, dr: ModuleType, scene: Scene) -> dict[str, Any]:
+    """Mitsuba ``load_dict`` description of the scene's shapes (no emitter, no sensor)."""
+    result: dict[str, Any] = {"type": "scene"}
+    for index, (obj, name) in enumerate(
+        zip(scene.all_objects(), scene.object_names(), strict=True)
+    ):
+        result[f"shape_{index:03d}"] = shape_dict(mi, dr, obj, name)
+    return result
+
+
+def check_in_front(scene: Scene, world2cam: Pose) -> None:
+    """Raise :class:`InputError` naming any object that lies entirely behind the camera."""
+    for obj, name in zip(scene.all_objects(), scene.object_names(), strict=True):
+        z = world2cam.apply(obj.bounds_world())[:, 2]
+        if z.max() <= 0:
+            raise InputError(
+                f"scene.{name}",
+                "an object in front of the camera (z > 0 in the camera frame)",
+                f"all of it at z <= {z.max():.3g} m",
+            )

@@ -1,0 +1,173 @@
+"""Synthesise every frame of a pattern sequence from one tracing pass.
+
+Light transport is linear in the projected pattern, and each frame varies along one
+projector axis only, so a frame's radiance at camera pixel p is
+
+    L_f(p) = sum_s w_s(p) * profile_f(c_s(p)) + L_ambient(p),
+
+with ``w_s`` the white-projector radiance of sample s and ``c_s`` its projector column
+(``u_p``, frames of direction "v") or row (``v_p``, direction "h"). For all frames of one
+direction this is one sparse (pixels x projector columns) matrix times a dense
+(columns x frames) profile matrix.
+
+Pattern lookup
+--------------
+* ``"nearest"``: the DMD pixel containing the point, ``floor(c + 0.5)`` (pixel j covers
+  [j - 0.5, j + 0.5)); this is the physical staircase of a DMD.
+* ``"bilinear"``: linear interpolation between projector pixel centres, clamped to the edge
+  pixels' values in the outer half pixel.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import scipy.sparse
+
+from virtus.errors import InputError
+from virtus.render.tracing import Trace
+
+LOOKUPS = ("nearest", "bilinear")
+#: Pixels per block of the sparse product: (block x frames) float32 fits in L2 cache.
+_BLOCK_PIXELS = 1 << 14
+
+
+def lookup_matrix(
+    coordinate: np.ndarray, weight: np.ndarray, length: int, lookup: str = "nearest"
+) -> scipy.sparse.csr_array:
+    """Sparse (P, length) float32 matrix mapping a 1-D pattern profile to pixel radiance.
+
+    Parameters
+    ----------
+    coordinate : (P, S) float32 projector coordinate (u_p or v_p, pixels) of each sample.
+    weight : (P, S) float32 radiance weight of each sample (0 = no contribution).
+    length : projector width (for u_p) or height (for v_p) in pixels.
+    lookup : ``"nearest"`` or ``"bilinear"`` (see the module docstring).
+    """
+    if lookup not in LOOKUPS:
+        raise InputError("lookup", f"one of {LOOKUPS}", lookup)
+    n_pixels = coordinate.shape[0]
+    used = weight != 0
+    counts = used.sum(axis=1)
+    w = weight[used]
+    c = coordinate[used]
+    if lookup == "nearest":
+        columns = np.clip(np.floor(c + np.float32(0.5)), 0, length - 1).astype(np.int32)
+        data = w
+        per_row = counts
+    else:
+        x = np.clip(c, np.float32(0.0), np.float32(length - 1))
+        left = (
+            np.minimum(np.floor(x), length - 2).astype(np.int32)
+            if length > 1
+            else (np.zeros(x.shape, np.int32))
+        )
+        frac = (x - left).astype(np.float32) if length > 1 else np.zeros_like(x)
+        # Interleave (left, right) per sample so rows stay contiguous in CSR order.
+        columns = np.stack([left, np.minimum(left + 1, length - 1)], axis=1).ravel()
+        data = np.stack([w * (1 - frac), w * frac], axis=1).ravel()
+        per_row = 2 * counts
+    indptr = np.zeros(n_pixels + 1, dtype=np.int64)
+    np.cumsum(per_row, out=indptr[1:])
+    return scipy.sparse.csr_array(
+        (data.astype(np.float32, copy=False), columns, indptr), shape=(n_pixels, length)
+    )
+
+
+def _frame_groups(sequence: Any) -> dict[str | None, list[int]]:
+    groups: dict[str | None, list[int]] = {"v": [], "h": [], None: []}
+    for index, frame in enumerate(sequence.frames):
+        direction = getattr(frame, "direction", None)
+        if direction not in groups:
+            raise InputError(f"sequence.frames[{index}].direction", '"v", "h" or None', direction)
+        groups[direction].append(index)
+    return groups
+
+
+def _profiles(sequence: Any, indices: list[int], length: int) -> np.ndarray:
+    """(length, F) float32 matrix of the frames' 1-D profiles."""
+    columns = []
+    for index in indices:
+        profile = np.asarray(sequence.profile(index), dtype=np.float32)
+        if profile.shape != (length,):
+            raise InputError(
+                f"sequence.profile({index})",
+                f"shape ({length},) for this projector",
+                f"shape {profile.shape}",
+            )
+        columns.append(profile)
+    return np.stack(columns, axis=1)
+
+
+def synthesize(
+    trace: Trace,
+    sequence: Any,
+    lookup: str = "nearest",
+    *,
+    transform: Callable[[np.ndarray], np.ndarray] | None = None,
+    dtype: Any = np.float32,
+) -> np.ndarray:
+    """Every frame of ``sequence`` from one trace.
+
+    Parameters
+    ----------
+    trace : the tracing pass of this pose.
+    sequence : a pattern sequence (``virtus.patterns``): ``frames[i].direction`` in
+        {"v", "h", None} and ``profile(i)`` -> (L,) values in [0, 1] along the varying axis
+        (L = projector width for "v", height for "h", 1 for uniform frames).
+    lookup : ``"nearest"`` (DMD pixels, default) or ``"bilinear"``.
+    transform : optional pointwise function applied to each block of radiance, shape
+        (frames, pixels) float32, before it is stored (e.g. a sensor's digitisation); fusing
+        it here avoids materialising the float radiance of all frames.
+    dtype : dtype of the result (that of ``transform``'s output).
+
+    Returns
+    -------
+    (F, H, W) frames in sequence order: radiance (float32, same units as ``trace.weight``),
+    or ``transform`` of it.
+    """
+    if lookup not in LOOKUPS:
+        raise InputError("lookup", f"one of {LOOKUPS}", lookup)
+    n_frames = len(sequence.frames)
+    if n_frames == 0:
+        raise InputError("sequence", "at least one frame", "an empty sequence")
+    height, width = trace.height, trace.width
+    n_pixels = height * width
+    transform = transform or (lambda block: block)
+    ambient = trace.ambient if np.any(trace.ambient) else None
+    out = np.empty((n_frames, n_pixels), dtype=dtype)
+    groups = _frame_groups(sequence)
+    lengths = {"v": trace.projector_width, "h": trace.projector_height}
+    for direction, coordinate in (("v", trace.u_p), ("h", trace.v_p)):
+        rows = groups[direction]
+        if not rows:
+            continue
+        matrix = lookup_matrix(coordinate, trace.weight, lengths[direction], lookup)
+        profiles = _profiles(sequence, rows, lengths[direction])
+        index = np.asarray(rows)
+        contiguous = bool(np.all(np.diff(index) == 1))
+        # Pixel blocks: the transposed (frames, pixels) write stays in cache; a whole-image
+        # transpose would cost more than the sparse product itself.
+        for start in range(0, n_pixels, _BLOCK_PIXELS):
+            stop = min(start + _BLOCK_PIXELS, n_pixels)
+            block = (matrix[start:stop] @ profiles).T
+            if ambient is not None:
+                block = block + ambient[None, start:stop]
+            block = transform(block)
+            if contiguous:
+                out[index[0] : index[-1] + 1, start:stop] = block
+            else:
+                out[index, start:stop] = block
+    if groups[None]:
+        white = trace.weight.sum(axis=1)
+        for index in groups[None]:
+            level = np.asarray(sequence.profile(index), dtype=np.float32).reshape(-1)
+            if level.shape != (1,):
+                raise InputError(f"sequence.profile({index})", "shape (1,)", level.shape)
+            frame = white * level[0]
+            if ambient is not None:
+                frame += ambient
+            out[index] = transform(frame[None, :])[0]
+    return out.reshape(n_frames, height, width)
