@@ -1,0 +1,105 @@
+"""``virtus calibrate``: capture a circle board in many poses, calibrate, compare with the truth."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+DEFAULT_OUT = Path("virtus-calibration")
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("calibrate")
+    def calibrate(
+        out: Annotated[Path, typer.Option(help="Output directory.")] = DEFAULT_OUT,
+        rig: Annotated[
+            Path | None, typer.Option(help="True rig JSON to render with; default: the paper's.")
+        ] = None,
+        board: Annotated[str, typer.Option(help="Circle board ROWSxCOLS (4x7, 5x9, 7x13).")] = (
+            "7x13"
+        ),
+        poses: Annotated[str, typer.Option(help="'paper' (18 poses) or 'random:N'.")] = "paper",
+        spp: Annotated[int, typer.Option(help="Supersamples per pixel (perfect square).")] = 4,
+        seed: Annotated[int, typer.Option(help="Seed of the random poses.")] = 0,
+    ) -> None:
+        """Render the board in every pose (52 frames each), calibrate camera, projector and
+        their pose, and write OUT/calibration.json (+ OpenCV YAML and the paper's txt files)."""
+        import warnings
+
+        from rich.console import Console
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+        from virtus.calib.episode import calibrate_rig
+        from virtus.optics import Rig, default_rig
+
+        true_rig = Rig.load_json(rig) if rig is not None else default_rig()
+        console = Console()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            with Progress(
+                TextColumn("[bold]capture"),
+                BarColumn(),
+                TextColumn("{task.completed}/{task.total}"),
+                TextColumn("{task.description}"),
+                TimeElapsedColumn(),
+                console=console,
+            ) as bar:
+                task = bar.add_task("", total=None)
+
+                def progress(done: int, total: int, name: str) -> None:
+                    bar.update(task, completed=done, total=total, description=name)
+
+                result = calibrate_rig(
+                    true_rig,
+                    board=board,
+                    poses=poses,
+                    spp=spp,
+                    rng=seed,
+                    progress=progress,
+                    out_dir=out,
+                )
+        for warning in caught:
+            console.print(f"[yellow]warning:[/yellow] {warning.message}")
+        _print_summary(console, result.to_dict())
+        console.print(f"wrote {out / 'calibration.json'}")
+
+
+def _print_summary(console: Any, data: dict[str, Any]) -> None:
+    from rich.table import Table
+
+    rms = data["rms_px"]
+    paper = data["paper_rms_px"]
+    table = Table(title="reprojection error (RMS, px)")
+    table.add_column("")
+    table.add_column("virtus", justify="right")
+    table.add_column("paper", justify="right")
+    for key in ("camera", "projector", "stereo"):
+        ref = paper.get(key)
+        table.add_row(key, f"{rms[key]:.4f}", "-" if ref is None else f"{ref:.3f}")
+    console.print(table)
+    truth = data.get("truth_error")
+    if truth is None:
+        return
+    table = Table(title="calibrated - true")
+    for column in ("device", "fx %", "fy %", "cx px", "cy px"):
+        table.add_column(column, justify="right")
+    for device in ("camera", "projector"):
+        e = truth[device]
+        table.add_row(
+            device,
+            f"{100 * e['fx_rel_error']:+.4f}",
+            f"{100 * e['fy_rel_error']:+.4f}",
+            f"{e['cx_error_px']:+.3f}",
+            f"{e['cy_error_px']:+.3f}",
+        )
+    console.print(table)
+    ext = truth["proj2cam"]
+    console.print(
+        f"proj2cam: baseline {1000 * ext['baseline_error_m']:+.4f} mm, "
+        f"translation {1000 * ext['translation_error_m']:.4f} mm, "
+        f"rotation {ext['rotation_error_deg']:.5f} deg"
+    )
+    if data["dropped_poses"]:
+        console.print(f"dropped poses: {', '.join(data['dropped_poses'])}")
