@@ -7,7 +7,8 @@ Conventions (shared with :mod:`virtus.patterns`):
   with ``d_n = 2 pi n / N``; wrapped phases lie in ``[-pi, pi)``.
 * Absolute phase of a fringe of period ``T`` (projector px) is ``Phi = 2 pi u / T``, with the
   origin ``u = 0`` at the centre of projector pixel 0, so ``u = Phi T / (2 pi)``.
-* Fringe order ``k = floor(u / T)``: ``Phi = mod(phi, 2 pi) + 2 pi k``.
+* Fringe order ``k = floor(u / T + 1/2)``: ``Phi = phi + 2 pi k`` with the wrapped phase
+  ``phi`` in ``[-pi, pi)``, so orders change where the wrapped phase jumps.
 * Gray codes are given most significant bit first.
 
 Every function is vectorised over arbitrary trailing ``(...)`` pixel shapes, typically
@@ -187,38 +188,37 @@ def gray_bits_to_order(bits: np.ndarray) -> np.ndarray:
     return order
 
 
-def complementary_order(order: np.ndarray, complement_bit: np.ndarray) -> np.ndarray:
-    """Fringe order ``k2 = floor((u + T/2) / T)`` from the Gray order and the complementary bit.
+def complementary_order(code: np.ndarray) -> np.ndarray:
+    """Floor order ``floor(u / T)`` from the half-period code of the complementary Gray code.
 
-    The complementary pattern shows the parity of ``k2``: stripes one period wide whose edges
-    lie half a period away from the Gray-code edges. Since ``k2`` is ``k1`` or ``k1 + 1``,
-    the parity picks the right one; it stays correct where ``k1`` is off by one near a Gray
-    edge, because the complementary stripes do not change there.
+    The ``n`` Gray frames plus the complementary frame form the ``(n + 1)``-bit Gray code of
+    the half-period index ``g = floor(2 u / T + 1)``; its ``n`` leading bits are the Gray code
+    of the fringe order ``k1 = floor(u / T + 1/2)``. This returns ``k2 = floor((g - 1) / 2)
+    = floor(u / T)``, whose edges lie half a period away from those of ``k1``; a misread bit
+    at a ``k1`` edge only moves ``g`` to a neighbour with the same ``k2``.
 
     Parameters
     ----------
-    order : (...) int array, ``k1`` decoded from the Gray code.
-    complement_bit : (...) bool, the binarised complementary frame.
+    code : (...) int, ``g`` decoded by :func:`gray_bits_to_order` from the ``n + 1`` bits.
 
     Returns
     -------
-    (...) int64, ``k2``.
+    (...) int64, ``k2 = floor(u / T)`` (-1 left of ``u = 0``).
     """
-    k1 = np.asarray(order, dtype=np.int64)
-    return k1 + ((k1 ^ np.asarray(complement_bit, dtype=np.int64)) & 1)
+    return (np.asarray(code, dtype=np.int64) - 1) >> 1
 
 
 def unwrap_gray(
-    phase: np.ndarray, order: np.ndarray, shifted_order: np.ndarray | None = None
+    phase: np.ndarray, order: np.ndarray, floor_order: np.ndarray | None = None
 ) -> np.ndarray:
     """Absolute phase from a wrapped phase and Gray-code fringe orders.
 
     Parameters
     ----------
-    phase : (...) float, wrapped phase in radians (any 2 pi branch).
-    order : (...) int, ``k1 = floor(u / T)`` from the Gray code.
-    shifted_order : (...) int, ``k2 = floor((u + T/2) / T)`` from :func:`complementary_order`,
-        or ``None`` to use ``k1`` everywhere (period-edge jumps are then left in).
+    phase : (...) float, wrapped phase in radians (any 2 pi branch; wrapped to [-pi, pi)).
+    order : (...) int, ``k1 = floor(u / T + 1/2)`` from the Gray code.
+    floor_order : (...) int, ``k2 = floor(u / T)`` from :func:`complementary_order`, or
+        ``None`` to use ``k1`` everywhere (period-edge jumps are then left in).
 
     Returns
     -------
@@ -226,19 +226,20 @@ def unwrap_gray(
 
     Notes
     -----
-    With ``phi0 = mod(phi, 2 pi)``: ``k = k2`` where ``phi0 < pi/2``, ``k1`` where
-    ``pi/2 <= phi0 < 3pi/2`` and ``k2 - 1`` where ``phi0 >= 3pi/2``, so each order is read a
-    quarter period away from its own stripe edges (complementary Gray code, Wu et al., Opt.
-    Lasers Eng. 2019).
+    With ``phi`` in ``[-pi, pi)``: ``k = k1`` where ``|phi| < pi/2``, ``k2`` where
+    ``phi >= pi/2`` and ``k2 + 1`` where ``phi < -pi/2``. Each order is thus read at least a
+    quarter period away from its own code edges, where a blurred or pixelated Gray code is
+    unambiguous (complementary Gray code; Zhang, Chen, Wu et al., Opt. Lasers Eng. 2018-2019).
     """
-    phi0 = np.mod(np.asarray(phase, dtype=np.float64), TWO_PI)
+    phi = wrap(phase)
     k1 = np.asarray(order, dtype=np.int64)
-    if shifted_order is None:
+    if floor_order is None:
         k = k1
     else:
-        k2 = np.asarray(shifted_order, dtype=np.int64)
-        k = np.where(phi0 < 0.5 * np.pi, k2, np.where(phi0 >= 1.5 * np.pi, k2 - 1, k1))
-    return phi0 + TWO_PI * k
+        k2 = np.asarray(floor_order, dtype=np.int64)
+        half = 0.5 * np.pi
+        k = np.where(phi >= half, k2, np.where(phi < -half, k2 + 1, k1))
+    return phi + TWO_PI * k
 
 
 def beat_period(period_a: float, period_b: float) -> float:
@@ -306,11 +307,13 @@ def unwrap_heterodyne(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Multi-frequency (heterodyne) unwrapping.
 
-    The periods are sorted from fine to coarse and beaten pairwise, level by level (for three
-    periods: ``T12``, ``T23``, then ``T123``), until one beat remains; that beat must cover the
-    projector axis (``T_top >= extent``) and is made absolute with
-    :func:`absolute_phase_in_window`. Unwrapping then descends the pyramid with
-    :func:`unwrap_with_reference` down to the finest period.
+    The finest period ``T1`` beats with every other period ``Ti``: the wrapped phase
+    difference ``phi_1 - phi_i`` is the phase of a fringe of period ``T1 Ti / (Ti - T1)``.
+    The longest beat must cover the projector axis (``>= extent``) and is made absolute with
+    :func:`absolute_phase_in_window`; each shorter beat, then ``T1`` itself, is unwrapped from
+    the previous level with :func:`unwrap_with_reference` (Towers et al., Opt. Lett. 28,
+    887, 2003). A level ``r`` times finer than its reference multiplies the reference's phase
+    noise by ``r``, so keep the ratios modest (8 for the 64/63/56-fringe choice).
 
     Parameters
     ----------
@@ -320,38 +323,42 @@ def unwrap_heterodyne(
 
     Returns
     -------
-    absolute : (...) float64, absolute phase of the finest period, radians.
+    absolute : (...) float64, absolute phase ``2 pi u / T1`` of the finest period, radians.
     residual : (...) float64, the largest ``|residual|`` of the unwrapping steps, radians
-        (see :func:`unwrap_with_reference`).
+        (see :func:`unwrap_with_reference`); near pi the fringe order is unreliable.
     """
-    values = [float(p) for p in periods]
-    if len(values) < 2:
-        raise InputError("periods", "at least two periods", periods)
+    values = [positive("periods", p) for p in periods]
+    if len(values) < 2 or len(set(values)) != len(values):
+        raise InputError("periods", "two or more different periods", periods)
     if len(phases) != len(values):
         raise InputError("phases", f"{len(values)} phase maps (one per period)", len(phases))
-    order = np.argsort(values)
-    level = [
-        (positive("periods", values[i]), np.asarray(phases[i], dtype=np.float64)) for i in order
-    ]
-    pyramid = [level]
-    while len(level) > 1:
-        beats = []
-        for (period_a, phase_a), (period_b, phase_b) in zip(level[:-1], level[1:], strict=True):
-            # The beat phase has frequency |1/Ta - 1/Tb|; subtract so that it grows with u.
-            difference = phase_a - phase_b if period_a < period_b else phase_b - phase_a
-            beats.append((beat_period(period_a, period_b), wrap(difference)))
-        level = beats
-        pyramid.append(level)
-    top_period, top_phase = pyramid[-1][0]
+    finest = int(np.argmin(values))
+    fine_period = values[finest]
+    fine_phase = np.asarray(phases[finest], dtype=np.float64)
+    # (beat period, beat phase) from the coarsest beat down; the beat grows with u because
+    # 1/T1 > 1/Ti.
+    levels = sorted(
+        (
+            (
+                beat_period(fine_period, values[i]),
+                wrap(fine_phase - np.asarray(phases[i])),
+            )
+            for i in range(len(values))
+            if i != finest
+        ),
+        key=lambda level: -level[0],
+    )
+    top_period, top_phase = levels[0]
     if top_period < extent:
         raise InputError(
-            "periods", f"periods whose beat covers the extent {extent} px", f"beat {top_period} px"
+            "periods",
+            f"periods whose longest beat with the finest covers the extent {extent} px",
+            f"longest beat {top_period:.6g} px",
         )
     absolute = absolute_phase_in_window(top_phase, top_period, extent)
     residual = np.zeros_like(absolute)
     reference_period = top_period
-    for lower in reversed(pyramid[:-1]):
-        period, phase = lower[0]
+    for period, phase in [*levels[1:], (fine_period, fine_phase)]:
         absolute, step_residual = unwrap_with_reference(phase, absolute, reference_period / period)
         residual = np.maximum(residual, np.abs(step_residual))
         reference_period = period
