@@ -150,7 +150,7 @@ class _Tracer:
 
     def centre(self, directions: np.ndarray) -> dict[str, np.ndarray]:
         """Pixel-centre rays (3, N) float32, camera frame -> distance, hit, shadow, normal."""
-        mi, dr = self.mi, self.dr
+        dr = self.dr
         si = self.mscene.ray_intersect(self._rays(directions))
         hit = si.is_valid()
         occluded = self.mscene.ray_test(si.spawn_ray_to(self.projector), hit)
