@@ -13,6 +13,18 @@ OPENCV_AGREEMENT_PX = 1e-9
 PROJECTED_SIZE_M = 1e-4
 
 # --- patterns / phase -------------------------------------------------------------------
+#: decoding noise-free float frames: the least-squares phase is exact up to float rounding
+#: (measured ~1e-13 rad); 1e-9 rad still fails on any sign or shift error.
+PHASE_EXACT_RAD = 1e-9
+#: decode RMS after 8-bit camera quantisation (issue requirement). Quantisation (0.29 DN
+#: RMS) gives 0.004 px (18 steps) to 0.007 px (6-step heterodyne) measured at B ~ 70 DN.
+DECODE_RMS_PX = 0.02
+#: largest single decode error in the same tests: measured <= 0.035 px over 1e6 points; a
+#: fringe-order error moves a point by a whole period (>= 16 px), so 0.1 px catches it.
+DECODE_MAX_PX = 0.1
+#: measured phase std vs sigma_phi = (sigma / B) sqrt(2 / N) (issue requirement: 20 %). With
+#: 40 000 pixels the std's own sampling error is 0.4 %, so a wrong N or B dependence fails.
+NOISE_STD_REL = 0.2
 
 # --- reconstruct ------------------------------------------------------------------------
 #: triangulating exact correspondences (issue requirement). Closed-form ray intersection in

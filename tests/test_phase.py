@@ -1,0 +1,129 @@
+"""Decoding math of virtus.phase against ground truth built here (seeded)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests import tolerances as tol
+from virtus import phase
+from virtus.errors import InputError
+
+TWO_PI = 2.0 * np.pi
+
+
+def phase_frames(phi: np.ndarray, a: np.ndarray, b: np.ndarray, steps: int) -> np.ndarray:
+    """I_n = A + B cos(phi + 2 pi n / N), n = 1..N (the project's sign convention)."""
+    n = np.arange(1, steps + 1).reshape(-1, *([1] * np.ndim(phi)))
+    return a + b * np.cos(phi + TWO_PI * n / steps)
+
+
+def assert_phase_equal(actual: np.ndarray, expected: np.ndarray, atol: float) -> None:
+    """Phases equal modulo 2 pi."""
+    difference = phase.wrap(np.asarray(actual) - np.asarray(expected))
+    assert np.max(np.abs(difference)) <= atol
+
+
+def test_wrap_range() -> None:
+    values = np.array([-np.pi, np.pi, 3 * np.pi, -3 * np.pi, 0.0, 1e-18, -1e-18, 7.0])
+    wrapped = phase.wrap(values)
+    assert np.all(wrapped >= -np.pi) and np.all(wrapped < np.pi)
+    assert wrapped[1] == -np.pi  # +pi belongs to the next branch
+    assert_phase_equal(wrapped, values, 1e-12)
+
+
+@pytest.mark.parametrize("steps", [3, 4, 5, 7, 18])
+def test_wrapped_phase_recovers_phase_background_modulation(steps: int) -> None:
+    rng = np.random.default_rng(steps)
+    phi = rng.uniform(-np.pi, np.pi, (40, 30))
+    a = rng.uniform(10, 100, phi.shape)
+    b = rng.uniform(5, 80, phi.shape)
+    got_phi, got_a, got_b = phase.wrapped_phase(phase_frames(phi, a, b, steps))
+    assert got_phi.shape == phi.shape
+    assert np.all(got_phi >= -np.pi) and np.all(got_phi < np.pi)
+    assert_phase_equal(got_phi, phi, tol.PHASE_EXACT_RAD)
+    np.testing.assert_allclose(got_a, a, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(got_b, b, rtol=0, atol=1e-9)
+
+
+def test_wrapped_phase_sign_convention() -> None:
+    # Frames built with the opposite sign, I_n = A + B cos(phi - 2 pi n / N), decode to -phi:
+    # guards against a silently flipped convention.
+    phi = np.linspace(-3.0, 3.0, 13)
+    steps = 4
+    n = np.arange(1, steps + 1)[:, None]
+    flipped = 10 + 5 * np.cos(phi - TWO_PI * n / steps)
+    got, _, _ = phase.wrapped_phase(flipped)
+    assert_phase_equal(got, -phi, tol.PHASE_EXACT_RAD)
+
+
+def test_wrapped_phase_rejects_too_few_steps() -> None:
+    with pytest.raises(InputError) as info:
+        phase.wrapped_phase(np.zeros((2, 4, 4)))
+    assert info.value.name == "frames"
+
+
+def test_gray_code_round_trip_and_single_bit_steps() -> None:
+    k = np.arange(0, 4096)
+    code = phase.gray_encode(k)
+    np.testing.assert_array_equal(phase.gray_decode(code), k)
+    changed = code[1:] ^ code[:-1]
+    assert np.all(changed & (changed - 1) == 0)  # neighbours differ in exactly one bit
+    bits = np.array([(code >> (11 - b)) & 1 for b in range(12)], dtype=bool)
+    np.testing.assert_array_equal(phase.gray_bits_to_order(bits), k)
+
+
+def test_unwrap_gray_with_complement_fixes_edge_misreads() -> None:
+    rng = np.random.default_rng(7)
+    period = 17.3  # non-integer: the order edges fall inside projector pixels
+    edges = np.arange(0, 60) * period / 2  # order edges and the wrapped-phase jumps
+    u = np.concatenate(
+        [rng.uniform(-0.5, 1000, 5000), edges + 1e-6, edges - 1e-6, edges + 0.4, edges - 0.4]
+    )
+    u = u[u >= -0.5]
+    true_phase = TWO_PI * u / period
+    wrapped = phase.wrap(true_phase)
+    # A blurred or pixelated binary code is read as if at a slightly wrong position: here
+    # up to +-0.5 px, independently for the Gray code and the complementary frame.
+    k1_read = np.floor((u + rng.uniform(-0.5, 0.5, u.size)) / period + 0.5).astype(np.int64)
+    g_read = np.floor(2 * (u + rng.uniform(-0.5, 0.5, u.size)) / period + 1).astype(np.int64)
+    assert np.sum(k1_read != np.floor(u / period + 0.5)) > 50  # misreads do happen
+    absolute = phase.unwrap_gray(wrapped, k1_read, phase.complementary_order(g_read))
+    np.testing.assert_allclose(absolute, true_phase, rtol=0, atol=1e-9)
+    # Without the complement the misreads stay: one-period jumps.
+    plain = phase.unwrap_gray(wrapped, k1_read)
+    assert np.max(np.abs(plain - true_phase)) > np.pi
+
+
+def test_heterodyne_unwrapping_is_exact_and_checks_coverage() -> None:
+    periods = [1152 / 64, 1152 / 63, 1152 / 56]
+    u = np.linspace(-0.5, 1139.5, 20001)
+    wrapped = [phase.wrap(TWO_PI * u / p) for p in periods]
+    absolute, residual = phase.unwrap_heterodyne(wrapped, periods, 1140)
+    np.testing.assert_allclose(phase.phase_to_coordinate(absolute, periods[0]), u, atol=1e-9)
+    assert np.max(residual) < 1e-6
+    with pytest.raises(InputError) as info:
+        phase.unwrap_heterodyne(wrapped[:1] + wrapped[2:], [periods[0], periods[2]], 1140)
+    assert info.value.name == "periods"  # beat 144 px does not cover 1140 px
+
+
+def test_phase_coordinate_conversions() -> None:
+    u = np.array([-0.5, 0.0, 17.99, 911.5])
+    np.testing.assert_allclose(phase.coordinate_to_phase(u, 18.0), TWO_PI * u / 18.0)
+    np.testing.assert_allclose(phase.phase_to_coordinate(phase.coordinate_to_phase(u, 7.7), 7.7), u)
+    with pytest.raises(InputError):
+        phase.phase_to_coordinate(u, 0.0)
+
+
+def test_quality_mask_modulation_and_saturation() -> None:
+    modulation = np.array([[0.0, 5.0, 6.0, np.nan]])
+    frames = np.array([[[10, 10, 255, 10]], [[20, 20, 20, 20]], [[30, 30, 30, 30]]])
+    mask = phase.quality_mask(modulation, min_modulation=0.02, full_scale=255)  # 5.1 DN
+    np.testing.assert_array_equal(mask, [[False, False, True, False]])
+    saturated = phase.quality_mask(
+        modulation, min_modulation=0.0, full_scale=255, frames=frames, saturation_level=255
+    )
+    np.testing.assert_array_equal(saturated, [[True, True, False, False]])
+    with pytest.raises(InputError) as info:
+        phase.quality_mask(modulation, min_modulation=1.5)
+    assert info.value.name == "min_modulation"
