@@ -25,9 +25,9 @@ app = typer.Typer(
 
 def _register_commands() -> None:
     # One module per sub-command (import order = order in --help).
-    from virtus.cli import calibrate_cmd, patterns_cmd, rig_cmd
+    from virtus.cli import calibrate_cmd, capture_cmd, patterns_cmd, rig_cmd
 
-    for module in (rig_cmd, patterns_cmd, calibrate_cmd):
+    for module in (rig_cmd, patterns_cmd, calibrate_cmd, capture_cmd):
         module.register(app)
 
 
