@@ -56,9 +56,11 @@ def wrap(phase: np.ndarray) -> np.ndarray:
     -------
     (...) float64, radians in ``[-pi, pi)``; NaN stays NaN.
     """
-    wrapped = np.mod(np.asarray(phase, dtype=np.float64) + np.pi, TWO_PI) - np.pi
-    # np.mod can round a tiny negative argument up to exactly 2 pi, which would give +pi.
-    return np.where(wrapped >= np.pi, wrapped - TWO_PI, wrapped)
+    value = np.asarray(phase, dtype=np.float64)
+    wrapped = value - TWO_PI * np.floor((value + np.pi) / TWO_PI)
+    # Rounding can leave a value a hair outside the interval: fold it back.
+    wrapped = np.where(wrapped >= np.pi, wrapped - TWO_PI, wrapped)
+    return np.where(wrapped < -np.pi, wrapped + TWO_PI, wrapped)
 
 
 def wrapped_phase(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -89,7 +91,8 @@ def wrapped_phase(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
     flat = stack.reshape(steps, -1).astype(np.float64, copy=False)
     sums = weights @ flat
     # sum I_n cos d_n = (N B / 2) cos phi and sum I_n sin d_n = -(N B / 2) sin phi.
-    phase = wrap(np.arctan2(-sums[2], sums[1]))
+    phase = np.arctan2(-sums[2], sums[1])  # in [-pi, pi]
+    phase[phase >= np.pi] -= TWO_PI  # +pi belongs to [-pi, pi) as -pi
     background = sums[0] / steps
     modulation = (2.0 / steps) * np.hypot(sums[1], sums[2])
     shape = stack.shape[1:]
@@ -180,11 +183,13 @@ def gray_bits_to_order(bits: np.ndarray) -> np.ndarray:
     stack = np.asarray(bits, dtype=bool)
     if stack.ndim < 1 or stack.shape[0] < 1:
         raise InputError("bits", "an array of shape (n, ...) with n >= 1", f"shape {stack.shape}")
-    # Gray -> binary: b_1 = g_1, b_i = b_(i-1) XOR g_i.
-    binary = np.logical_xor.accumulate(stack, axis=0)
+    # Gray -> binary: b_1 = g_1, b_i = b_(i-1) XOR g_i (a loop: bool accumulate is slow).
+    binary = np.zeros(stack.shape[1:], dtype=bool)
     order = np.zeros(stack.shape[1:], dtype=np.int64)
-    for bit in binary:
-        order = (order << 1) | bit
+    for gray_bit in stack:
+        binary ^= gray_bit
+        order <<= 1
+        order |= binary
     return order
 
 
