@@ -238,6 +238,8 @@ def test_absent_direction_gives_nan() -> None:
     assert not result.mask_h.any()
     np.testing.assert_array_equal(result.mask, result.mask_v)
     np.testing.assert_allclose(result.proj_uv[..., 0], u, atol=1e-9)
+    uniform_only = PatternSequence(120, 80, (Frame("white"), Frame("black")))
+    assert not uniform_only.decode(np.zeros((2, 3, 4), dtype=np.uint8)).mask.any()
 
 
 # --- description and files --------------------------------------------------------------
@@ -249,6 +251,7 @@ def test_to_dict_from_dict_is_lossless() -> None:
         back = PatternSequence.from_dict(data)
         assert (back.width, back.height) == (sequence.width, sequence.height)
         assert back.frames == sequence.frames  # periods such as 1152/63 survive exactly
+        assert back == sequence and hash(back) == hash(sequence)
         np.testing.assert_array_equal(back.profile(7), sequence.profile(7))
 
 

@@ -238,7 +238,7 @@ class _Plan:
     complement: int | None = None  # index of the complementary frame
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True)
 class PatternSequence:
     """An ordered set of projector frames that knows how to encode and decode itself.
 
@@ -563,7 +563,7 @@ class PatternSequence:
                 backgrounds,
             )
             out[direction] = (absolute, valid)
-        mask = np.ones(shape, dtype=bool)
+        mask = np.full(shape, bool(self.directions))  # no fringes: nothing is valid
         for direction in self.directions:
             mask &= out[direction][1]
         coordinates = [
