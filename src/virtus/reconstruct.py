@@ -36,6 +36,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "Use",
+    "depth_edge_mask",
     "depth_map",
     "normals_from_points",
     "points_from_decoded",
@@ -186,6 +187,51 @@ def normals_from_points(point_map: object) -> np.ndarray:
     flip = np.einsum("...k,...k->...", normals, pts) > 0
     normals[flip] *= -1.0
     return normals
+
+
+def depth_edge_mask(point_map: object, focal_px: float, max_step: float = 20.0) -> np.ndarray:
+    """Pixels next to a depth discontinuity (mixed pixels at silhouettes).
+
+    A camera pixel at depth ``z`` covers ``z / f`` metres of a fronto-parallel surface; a
+    surface seen at angle ``theta`` stretches that by ``1 / cos(theta)``. A step to a
+    4-neighbour larger than ``max_step`` footprints (20 -> surfaces up to ~87 deg from
+    the view direction pass) is a jump between two surfaces, where a pixel sees a mixture of
+    both and decodes to a point between them.
+
+    Parameters
+    ----------
+    point_map : (H, W, 3) float, camera frame, metres, NaN where invalid.
+    focal_px : camera focal length in pixels (e.g. ``rig.camera.intrinsics.fx``).
+    max_step : allowed 3D step between neighbours, in pixel footprints.
+
+    Returns
+    -------
+    (H, W) bool, True for valid pixels with at least one valid 4-neighbour farther than the
+    allowed step (pixels both sides of the jump are flagged).
+    """
+    pts = as_float_array("point_map", point_map, (None, None, 3), allow_nan=True)
+    focal = float(focal_px)
+    if not np.isfinite(focal) or focal <= 0:
+        raise InputError("focal_px", "a positive number", focal_px)
+    if not np.isfinite(max_step) or max_step <= 0:
+        raise InputError("max_step", "a positive number", max_step)
+    footprint = pts[..., 2] / focal
+    edge = np.zeros(pts.shape[:2], dtype=bool)
+    for axis in (0, 1):
+        step = np.linalg.norm(np.diff(pts, axis=axis), axis=-1)
+        low = np.minimum(
+            footprint.take(range(footprint.shape[axis] - 1), axis=axis),
+            footprint.take(range(1, footprint.shape[axis]), axis=axis),
+        )
+        with np.errstate(invalid="ignore"):
+            jump = step > max_step * low  # NaN (a neighbour invalid) compares False
+        if axis == 0:
+            edge[:-1] |= jump
+            edge[1:] |= jump
+        else:
+            edge[:, :-1] |= jump
+            edge[:, 1:] |= jump
+    return edge
 
 
 # --- internals -----------------------------------------------------------------------------

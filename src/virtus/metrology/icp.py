@@ -56,8 +56,9 @@ def icp_to_mesh(
     *,
     max_distance: float | None = None,
     max_iterations: int = 50,
-    tol_translation: float = 1e-9,
-    tol_rotation: float = 1e-9,
+    tol_translation: float = 1e-8,
+    tol_rotation: float = 1e-8,
+    tol_relative_rms: float = 1e-5,
     max_points: int | None = 20_000,
     rng: np.random.Generator | int | None = 0,
 ) -> IcpResult:
@@ -73,6 +74,8 @@ def icp_to_mesh(
     max_iterations : iteration cap.
     tol_translation, tol_rotation : stop when an update moves less than these (metres,
         radians).
+    tol_relative_rms : also stop when the RMS distance changes by less than this fraction
+        between iterations (noisy clouds can creep along flat valleys of the cost).
     max_points : a random subset of this many points drives the registration (None: all).
     rng : random generator or seed for the subset.
 
@@ -92,6 +95,7 @@ def icp_to_mesh(
     max_iterations = positive_int("max_iterations", max_iterations)
     tol_t = positive("tol_translation", tol_translation)
     tol_r = positive("tol_rotation", tol_rotation)
+    tol_rms = positive("tol_relative_rms", tol_relative_rms)
     if max_points is not None:
         max_points = positive_int("max_points", max_points, minimum=6)
         if pts.shape[0] > max_points:
@@ -103,7 +107,7 @@ def icp_to_mesh(
     iteration = 0
     for iteration in range(1, max_iterations + 1):  # noqa: B007 - reported below
         moved = pose.apply(pts)
-        near = index.query(moved)
+        near = index.query(moved, exact=False)
         use = np.ones(len(pts), dtype=bool)
         if max_distance is not None:
             use = np.abs(near.distances) <= max_distance
@@ -121,7 +125,10 @@ def icp_to_mesh(
             near = _subset(near, near_enough)
         p, q, n = moved[use], near.points[use], near.normals[use]
         residual = np.einsum("ij,ij->i", p - q, n)
-        rms = float(np.sqrt(np.mean(residual**2)))
+        previous, rms = rms, float(np.sqrt(np.mean(residual**2)))
+        if abs(previous - rms) <= tol_rms * rms:
+            converged = True
+            break
         # Linearised update: rotation w (small angles) and translation v minimise
         # sum ((p + w x p + v - q) . n)^2 -> rows [p x n, n] . [w, v] = -(p - q) . n.
         # Centre p for conditioning (rotation about the centroid).

@@ -75,12 +75,16 @@ class MeshIndex:
         self.rho_max = float(np.max(np.linalg.norm(self.triangles - centroids[:, None], axis=2)))
         self.tree = cKDTree(centroids)
 
-    def query(self, points: object) -> ClosestPoints:
+    def query(self, points: object, *, exact: bool = True) -> ClosestPoints:
         """Closest points on the mesh.
 
         Parameters
         ----------
         points : (N, 3) float, metres, mesh frame.
+        exact : guarantee the closest point (see the module docstring). False returns the
+            closest point among the triangles of the 8 nearest centroids, which is the true
+            one for almost every point near the surface -- enough for ICP correspondences,
+            several times faster.
         """
         pts = as_points("points", points, 3)
         n = pts.shape[0]
@@ -100,7 +104,7 @@ class MeshIndex:
                 cf = cf.reshape(rows.size, k_eff)
                 self._update(pts, rows, cf, best_d, best_f, best_p)
                 settled[start : start + step] = cd[:, -1] - self.rho_max >= best_d[rows]
-            if k_eff == len(self.triangles):
+            if k_eff == len(self.triangles) or not exact:
                 settled[:] = True
             todo = todo[~settled]
             if k >= _MAX_K:
