@@ -32,6 +32,38 @@ NOISE_STD_REL = 0.2
 TRIANGULATION_M = 1e-6
 
 # --- render -----------------------------------------------------------------------------
+#: renderer vs Mitsuba's own projector emitter, same (unjittered) sample positions: mean
+#: |difference| / mean radiance. The issue asks for 1 %; measured ~1e-5 (float32 rounding and
+#: a few samples lying exactly on DMD pixel edges), so 1e-3 still catches any model error.
+MITSUBA_AGREEMENT_REL = 1e-3
+#: its signed counterpart, |mean difference| / mean radiance, against Mitsuba's jittered
+#: sampler (4 spp, 160 x 160 px): sampling noise (std 0.6e-3 per frame over 10 seeds) plus
+#: aliasing of our fixed 2 x 2 grid against binary stripes (-1.6e-3 mean on one Gray
+#: complement frame); measured |bias| <= 2.7e-3 over 10 seeds.
+MITSUBA_JITTERED_BIAS_REL = 5e-3
+#: white-frame radiance of a Lambertian plane facing the projector vs rho / D^2 (closed
+#: form of the point-source model). float32 shading: measured ~1e-7 relative.
+RADIANCE_REL = 1e-5
+#: decoded vs ground-truth projector coordinates, tilted plane, bilinear lookup, 4 spp,
+#: 8 bit, noise-free: issue requirement 0.02 px; measured 0.003 px.
+DECODE_BILINEAR_RMS_PX = 0.02
+#: DMD (nearest) staircase on a tilted plane, RMS px. A 1-px step sampled by 4 stratified
+#: points leaves ~0.15 px (0.29 = 1/sqrt(12) without any averaging); the bounds show it is
+#: the staircase, neither smoothed away (< 0.08) nor larger than unfiltered steps.
+NEAREST_STAIRCASE_RMS_PX = (0.08, 0.29)
+#: ground-truth depth vs the analytic plane: Mitsuba intersects in float32 (~1e-7 relative
+#: at 1 m; measured 3e-7 m); issue requirement 1e-6 m.
+PLANE_DEPTH_M = 1e-6
+#: ground-truth proj_uv vs projecting ground-truth points (issue: 1e-4 px); both float64,
+#: measured 1e-13 px.
+GT_PROJ_UV_PX = 1e-4
+#: default sphere radius from decoded frames and the true rig (issue: 0.02 mm); measured
+#: 0.011 mm (nearest, the default) and 0.001 mm (bilinear).
+SPHERE_RADIUS_M = 2e-5
+#: identical geometry traced two ways (box primitive vs the same box as a mesh, camera moved
+#: vs scene moved): Mitsuba intersects in float32, ~1e-7 m typically; a sphere's quadratic
+#: loses digits at grazing incidence (measured up to 3e-6 m at the limb).
+SAME_GEOMETRY_M = 1e-5
 
 # --- calib ------------------------------------------------------------------------------
 #: issue requirements for the end-to-end calibration (default rig, noise-free, 4 spp); the
