@@ -246,7 +246,7 @@ def test_invalid_phase_gives_nan_homographies():
     uv_map = projector_map(RIG, pose.board2cam)
     truth = _true_centres(board, pose.board2cam)
     rows, cols = np.mgrid[0 : CAM.height, 0 : CAM.width]
-    uv_map[np.hypot(cols - truth[0, 0], rows - truth[0, 1]) < 20] = np.nan  # most of circle 0
+    uv_map[np.hypot(cols - truth[0, 0], rows - truth[0, 1]) < 26] = np.nan  # most of circle 0
     homographies = local_homographies(uv_map, board, truth)
     assert np.isnan(homographies[0]).all() and np.isfinite(homographies[1:]).all()
 
