@@ -529,6 +529,14 @@ class Scene(_Model):
         names = [f"objects[{i}]" for i in range(len(self.objects))]
         return names + (["background"] if self.background is not None else [])
 
+    def _has_arrays(self) -> bool:
+        for obj in self.all_objects():
+            if isinstance(obj.material.albedo, np.ndarray):
+                return True
+            if isinstance(getattr(obj, "texture", None), np.ndarray):
+                return True
+        return False
+
     # -- I/O -------------------------------------------------------------------------------
 
     def to_dict(self, asset_dir: str | Path | None = None) -> dict[str, Any]:
@@ -545,6 +553,11 @@ class Scene(_Model):
             np.save(path, np.asarray(array, dtype=np.float64))
             return str(path)
 
+        if asset_dir is None and self._has_arrays():
+            raise VirtusError(
+                "an in-memory texture cannot be written to a scene file without an asset "
+                "folder; use Scene.to_yaml(path) or Scene.to_dict(asset_dir=...)"
+            )
         if asset_dir is not None:
             _ASSET_WRITER.append(write)
         try:
