@@ -316,3 +316,11 @@ def test_bad_decode_input_raises_input_error() -> None:
     with pytest.raises(InputError) as info:
         sequence.decode(bad)
     assert info.value.name == "frames" and "non-finite" in str(info.value)
+
+
+def test_float_frames_above_full_scale_are_refused():
+    sequence = default_sequence(64, 48)
+    frames = np.full((len(sequence), 4, 4), 200.0)  # DN values in a float array
+    with pytest.raises(InputError, match=r"^frames: expected values <= full_scale \(1\)"):
+        sequence.decode(frames)
+    assert sequence.decode(frames, full_scale=255.0).mask.shape == (4, 4)

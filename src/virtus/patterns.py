@@ -518,7 +518,8 @@ class PatternSequence:
         saturation_level : a pixel reaching this value (frame units, e.g. 255 for 8-bit) in
             any phase frame of a direction is invalid in it; ``None`` disables the check.
         full_scale : the frames' full scale; default ``iinfo(dtype).max`` for integer frames
-            (255 for uint8) and 1.0 for float frames (normalised images).
+            (255 for uint8) and 1.0 for float frames (normalised images); frames above it
+            are refused.
 
         Returns
         -------
@@ -536,6 +537,12 @@ class PatternSequence:
             integer = np.issubdtype(stack.dtype, np.integer)
             full_scale = float(np.iinfo(stack.dtype).max) if integer else 1.0
         full_scale = positive("full_scale", full_scale)
+        if stack.max() > full_scale:
+            # e.g. float frames in DN decoded with the default 1.0: the modulation threshold
+            # would be meaningless, so refuse instead of passing every pixel.
+            raise InputError(
+                "frames", f"values <= full_scale ({full_scale:g}); pass full_scale", stack.max()
+            )
         shape = stack.shape[1:]
         threshold = None
         if any(f.kind == "white" for f in self.frames) and any(
