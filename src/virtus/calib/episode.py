@@ -27,7 +27,7 @@ import numpy as np
 from virtus.calib.board import CircleBoard, board_from_spec
 from virtus.calib.detect import find_grid, refine_centres
 from virtus.calib.io import save_json, save_opencv_yaml, save_paper_txt
-from virtus.calib.poses import BoardPose, pose_set
+from virtus.calib.poses import BoardPose, check_pose, pose_set
 from virtus.calib.projector import local_homographies
 from virtus.calib.solve import PoseObservation, StereoCalibration, calibrate_observations
 from virtus.calib.truth import truth_error
@@ -177,6 +177,7 @@ def calibrate_rig(
     progress: Progress | None = None,
     out_dir: str | Path | None = None,
     fix_intrinsics: bool = False,
+    check_poses: bool = True,
 ) -> CalibrationResult:
     """Capture a board in every pose with ``true_rig`` and calibrate it back.
 
@@ -191,6 +192,9 @@ def calibrate_rig(
     out_dir : if given, per-pose observations go to ``out_dir/poses/`` as they finish and
         the result to ``out_dir/calibration.json`` (+ YAML and the paper's text files).
     fix_intrinsics : keep single-device intrinsics in the stereo step.
+    check_poses : check a given pose list against both fields first (raise on the first
+        pose outside); ``False`` captures them anyway (poses whose board is not fully seen
+        are then dropped with a warning).
 
     Returns
     -------
@@ -207,7 +211,13 @@ def calibrate_rig(
     board = board_from_spec(board)
     seed = rng if isinstance(rng, int) else None
     gen = as_rng(rng)
-    pose_list = pose_set(poses, true_rig, board, gen) if isinstance(poses, str) else list(poses)
+    if isinstance(poses, str):
+        pose_list = pose_set(poses, true_rig, board, gen)
+    else:
+        pose_list = list(poses)
+        if check_poses:
+            for pose in pose_list:
+                check_pose(true_rig, board, pose)
     proj = true_rig.projector.intrinsics
     sequence = default_sequence(proj.width, proj.height)
     texture = board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=BOARD_BLUR_M)

@@ -1,0 +1,87 @@
+"""End-to-end virtual calibration: render the board with the renderer, calibrate, compare
+with the true rig (the issue's numbers: default rig, noise-free, 4 spp)."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from tests import tolerances as tol
+from virtus.calib.board import board_from_spec
+from virtus.calib.detect import find_grid
+from virtus.calib.episode import BOARD_BLUR_M, board_scene, calibrate_rig
+from virtus.calib.poses import BoardPose, paper_poses
+from virtus.errors import VirtusError
+from virtus.optics import Pose, Rig, default_rig
+
+pytestmark = pytest.mark.slow
+
+RIG = default_rig()
+
+
+def _cut_off_pose() -> BoardPose:
+    """The board 14 cm right of the axis: its right columns leave the camera image."""
+    return BoardPose("cut_off_right", Pose(np.eye(3), (0.14, 0.0, 1.0)))
+
+
+def test_paper_calibration_meets_the_issue_numbers(tmp_path):
+    result = calibrate_rig(RIG, out_dir=tmp_path)
+    assert result.rms_px["camera"] <= tol.CALIB_RMS_PX
+    assert result.rms_px["projector"] <= tol.CALIB_RMS_PX
+    error = result.truth_error
+    for device in ("camera", "projector"):
+        assert abs(error[device]["fx_rel_error"]) <= tol.CALIB_FOCAL_REL
+        assert abs(error[device]["fy_rel_error"]) <= tol.CALIB_FOCAL_REL
+        assert error[device]["principal_point_error_px"] <= tol.CALIB_PRINCIPAL_POINT_PX
+    assert abs(error["proj2cam"]["baseline_error_m"]) <= tol.CALIB_BASELINE_M
+    assert error["proj2cam"]["rotation_error_deg"] <= tol.CALIB_ROTATION_DEG
+    # Files: the rig schema reads back, finished poses were kept one by one.
+    data = json.loads((tmp_path / "calibration.json").read_text())
+    assert data["truth_error"]["proj2cam"] == pytest.approx(error["proj2cam"])
+    assert len(data["per_pose"]) == 18 and not data["dropped_poses"]
+    assert Rig.load_json(tmp_path / "calibration.json").baseline_m == pytest.approx(
+        result.rig.baseline_m
+    )
+    assert len(list((tmp_path / "poses").glob("*.npz"))) == 18
+
+
+@pytest.mark.parametrize("spec", ["4x7", "5x9", "7x13"])
+def test_rendered_paper_boards_are_detected(spec):
+    from virtus.patterns import default_sequence
+    from virtus.render import render
+
+    board = board_from_spec(spec)
+    pose = paper_poses(RIG, board)[16]  # 30 deg tilt with a 20 deg roll
+    sequence = default_sequence(912, 1140)
+    texture = board.texture(blur_m=BOARD_BLUR_M)
+    frames = render(RIG, board_scene(board, pose, texture), sequence, spp=4).frames
+    white = frames[[f.kind for f in sequence.frames].index("white")]
+    found = find_grid(white, board)
+    assert found is not None
+    truth = RIG.camera.intrinsics.project(pose.board2cam.apply(board.object_points))
+    np.testing.assert_allclose(found, truth, atol=tol.CALIB_DETECT_PX)
+
+
+def test_cut_off_pose_is_dropped_with_a_warning_naming_it():
+    board = board_from_spec("4x7")
+    poses = [*paper_poses(RIG, board)[9:12], _cut_off_pose()]
+    with pytest.raises(VirtusError, match="cut_off_right"):  # checked by default
+        calibrate_rig(RIG, board=board, poses=poses)
+    with pytest.warns(UserWarning, match="'cut_off_right' dropped: the camera did not detect"):
+        result = calibrate_rig(RIG, board=board, poses=poses, check_poses=False)
+    assert list(result.dropped_poses) == ["cut_off_right"]
+    assert [p["name"] for p in result.per_pose] == [p.name for p in poses[:3]]
+
+
+def test_fewer_than_three_usable_poses_is_a_clear_error(tmp_path):
+    board = board_from_spec("4x7")
+    poses = [*paper_poses(RIG, board)[9:11], _cut_off_pose()]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(VirtusError, match="at least 3 usable poses, got 2"):
+            calibrate_rig(RIG, board=board, poses=poses, check_poses=False, out_dir=tmp_path)
+    # The finished poses were written before the failure.
+    assert len(list((tmp_path / "poses").glob("*.npz"))) == 3
