@@ -94,7 +94,7 @@ def render(
         traced,
         sequence,
         lookup,
-        transform=lambda block: sensor.digitize(block, exposure_value, generator),
+        transform=lambda block, frames, pixels: sensor.digitize(block, exposure_value, generator),
         dtype=sensor.dtype,
     )
     return Rendering(

@@ -20,7 +20,9 @@ Pattern lookup
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -76,6 +78,14 @@ def lookup_matrix(
     )
 
 
+def _threads() -> int:
+    """CPUs this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
 def _frame_groups(sequence: Any) -> dict[str | None, list[int]]:
     groups: dict[str | None, list[int]] = {"v": [], "h": [], None: []}
     for index, frame in enumerate(sequence.frames):
@@ -106,7 +116,7 @@ def synthesize(
     sequence: Any,
     lookup: str = "nearest",
     *,
-    transform: Callable[[np.ndarray], np.ndarray] | None = None,
+    transform: Callable[[np.ndarray, np.ndarray, slice], np.ndarray] | None = None,
     dtype: Any = np.float32,
 ) -> np.ndarray:
     """Every frame of ``sequence`` from one trace.
@@ -118,9 +128,13 @@ def synthesize(
         {"v", "h", None} and ``profile(i)`` -> (L,) values in [0, 1] along the varying axis
         (L = projector width for "v", height for "h", 1 for uniform frames).
     lookup : ``"nearest"`` (DMD pixels, default) or ``"bilinear"``.
-    transform : optional pointwise function applied to each block of radiance, shape
-        (frames, pixels) float32, before it is stored (e.g. a sensor's digitisation); fusing
-        it here avoids materialising the float radiance of all frames.
+    transform : optional pointwise function ``transform(block, frames, pixels)`` applied to
+        each block of radiance before it is stored (e.g. a sensor's digitisation), where
+        ``block`` is (len(frames), n) float32, ``frames`` the block's frame indices in the
+        sequence and ``pixels`` its slice of the row-major pixel index. Fusing it here avoids
+        materialising the float radiance of all frames. Blocks are processed concurrently
+        and in no fixed order: a random transform (noise) must draw from generators derived
+        from ``frames`` and ``pixels`` to stay deterministic.
     dtype : dtype of the result (that of ``transform``'s output).
 
     Returns
@@ -135,7 +149,7 @@ def synthesize(
         raise InputError("sequence", "at least one frame", "an empty sequence")
     height, width = trace.height, trace.width
     n_pixels = height * width
-    transform = transform or (lambda block: block)
+    transform = transform or (lambda block, frames, pixels: block)
     ambient = trace.ambient if np.any(trace.ambient) else None
     out = np.empty((n_frames, n_pixels), dtype=dtype)
     groups = _frame_groups(sequence)
@@ -146,20 +160,7 @@ def synthesize(
             continue
         matrix = lookup_matrix(coordinate, trace.weight, lengths[direction], lookup)
         profiles = _profiles(sequence, rows, lengths[direction])
-        index = np.asarray(rows)
-        contiguous = bool(np.all(np.diff(index) == 1))
-        # Pixel blocks: the transposed (frames, pixels) write stays in cache; a whole-image
-        # transpose would cost more than the sparse product itself.
-        for start in range(0, n_pixels, _BLOCK_PIXELS):
-            stop = min(start + _BLOCK_PIXELS, n_pixels)
-            block = (matrix[start:stop] @ profiles).T
-            if ambient is not None:
-                block = block + ambient[None, start:stop]
-            block = transform(block)
-            if contiguous:
-                out[index[0] : index[-1] + 1, start:stop] = block
-            else:
-                out[index, start:stop] = block
+        _fill_direction(out, rows, matrix, profiles, ambient, transform)
     if groups[None]:
         white = trace.weight.sum(axis=1)
         for index in groups[None]:
@@ -169,5 +170,36 @@ def synthesize(
             frame = white * level[0]
             if ambient is not None:
                 frame += ambient
-            out[index] = transform(frame[None, :])[0]
+            out[index] = transform(frame[None, :], np.array([index]), slice(0, n_pixels))[0]
     return out.reshape(n_frames, height, width)
+
+
+def _fill_direction(
+    out: np.ndarray,
+    rows: list[int],
+    matrix: scipy.sparse.csr_array,
+    profiles: np.ndarray,
+    ambient: np.ndarray | None,
+    transform: Callable[[np.ndarray, np.ndarray, slice], np.ndarray],
+) -> None:
+    """``out[rows] = transform((matrix @ profiles).T + ambient)``, by pixel blocks: the
+    transposed (frames, pixels) write stays in cache (a whole-image transpose would cost
+    more than the sparse product itself), and blocks run on a thread pool (scipy's sparse
+    product and numpy's ufuncs release the GIL)."""
+    n_pixels = matrix.shape[0]
+    index = np.asarray(rows)
+    target = out[index[0] : index[-1] + 1] if np.all(np.diff(index) == 1) else None
+
+    def block_of_frames(start: int) -> None:
+        stop = min(start + _BLOCK_PIXELS, n_pixels)
+        block = (matrix[start:stop] @ profiles).T
+        if ambient is not None:
+            block = block + ambient[None, start:stop]
+        block = transform(block, index, slice(start, stop))
+        if target is not None:
+            target[:, start:stop] = block
+        else:
+            out[index, start:stop] = block
+
+    with ThreadPoolExecutor(max_workers=_threads()) as pool:
+        list(pool.map(block_of_frames, range(0, n_pixels, _BLOCK_PIXELS)))

@@ -170,9 +170,17 @@ class _Tracer:
         dr.eval(*out.values())
         return {key: value.numpy() for key, value in out.items()}
 
-    def samples(self, directions: np.ndarray) -> dict[str, np.ndarray]:
-        """Supersample rays (3, N) float32 -> normalised projector coordinates (x/z, y/z),
-        white-projector radiance (0 where unlit) and diffuse reflectance."""
+    def samples(
+        self, directions: np.ndarray, projector: Intrinsics, spp: int, ambient: float
+    ) -> dict[str, np.ndarray]:
+        """Supersample rays (3, N) float32 -> per sample: white-projector radiance divided by
+        ``spp`` (0 where unlit), projector coordinates (0 where unlit) and, with ambient
+        light, the diffuse reflectance.
+
+        Without projector distortion everything is computed here; with distortion the
+        normalised coordinates ``(x/z, y/z)`` are returned (keys ``xn``, ``yn``) for the
+        projector model to distort in numpy.
+        """
         mi, dr = self.mi, self.dr
         ray = self._rays(directions)
         si = self.mscene.ray_intersect(ray)
@@ -185,14 +193,24 @@ class _Tracer:
         bsdf = si.bsdf(ray)
         f_cos = bsdf.eval(mi.BSDFContext(), si, si.to_local(to_projector), lit)[0]
         # pi f cos(theta_o) / (d^2 cos^3(theta_p)) = pi f cos(theta_o) |X_p| / z_p^3
-        radiance = dr.select(lit, dr.pi * f_cos * dr.norm(p_proj) / (z * z * z), 0.0)
+        radiance = dr.pi / spp * f_cos * dr.norm(p_proj) / (z * z * z)
         inv_z = dr.select(lit, dr.rcp(z), 0.0)
-        out = {
-            "xn": p_proj.x * inv_z,
-            "yn": p_proj.y * inv_z,
-            "radiance": radiance,
-            "rho_d": dr.select(hit, bsdf.eval_diffuse_reflectance(si, hit)[0], 0.0),
-        }
+        xn, yn = p_proj.x * inv_z, p_proj.y * inv_z
+        out = {}
+        if projector.has_distortion:
+            out.update(xn=xn, yn=yn, radiance=dr.select(lit, radiance, 0.0))
+        else:
+            u = float(projector.fx) * xn + float(projector.cx)
+            v = float(projector.fy) * yn + float(projector.cy)
+            lit &= (u >= -0.5) & (u < projector.width - 0.5)
+            lit &= (v >= -0.5) & (v < projector.height - 0.5)
+            out.update(
+                weight=dr.select(lit, radiance, 0.0),
+                u_p=dr.select(lit, u, 0.0),
+                v_p=dr.select(lit, v, 0.0),
+            )
+        if ambient > 0:
+            out["rho_d"] = dr.select(hit, bsdf.eval_diffuse_reflectance(si, hit)[0], 0.0)
         dr.eval(*out.values())
         return {key: value.numpy() for key, value in out.items()}
 
@@ -263,23 +281,28 @@ def trace(
     # ---- supersamples: projector coordinates and white-projector radiance ----
     n_rays = n_pixels * spp
     step = max(spp, _RAYS_PER_CHUNK // spp * spp)
-    parts = [tracer.samples(sample_dirs[:, i : i + step]) for i in range(0, n_rays, step)]
+    parts = [
+        tracer.samples(sample_dirs[:, i : i + step], projector, spp, scene.ambient)
+        for i in range(0, n_rays, step)
+    ]
     s = {
         key: np.concatenate([part[key] for part in parts]) if len(parts) > 1 else parts[0][key]
         for key in parts[0]
     }
     if projector.has_distortion:
         xy = projector.distort_normalized(np.stack([s["xn"], s["yn"]], axis=1))
-        xn, yn = xy[:, 0].astype(np.float32), xy[:, 1].astype(np.float32)
+        u_p = (projector.fx * xy[:, 0] + projector.cx).astype(np.float32)
+        v_p = (projector.fy * xy[:, 1] + projector.cy).astype(np.float32)
+        lit = (s["radiance"] > 0) & _inside(u_p, v_p, projector)
+        weight = np.where(lit, s["radiance"], np.float32(0.0))
+        u_p = np.where(lit, u_p, np.float32(0.0))
+        v_p = np.where(lit, v_p, np.float32(0.0))
     else:
-        xn, yn = s["xn"], s["yn"]
-    u_p = np.float32(projector.fx) * xn + np.float32(projector.cx)
-    v_p = np.float32(projector.fy) * yn + np.float32(projector.cy)
-    lit = (s["radiance"] > 0) & _inside(u_p, v_p, projector)
-    weight = np.where(lit, s["radiance"] * np.float32(1.0 / spp), np.float32(0.0))
-    u_p = np.where(lit, u_p, np.float32(0.0))
-    v_p = np.where(lit, v_p, np.float32(0.0))
-    ambient = np.float32(scene.ambient) * s["rho_d"].reshape(n_pixels, spp).mean(axis=1)
+        weight, u_p, v_p = s["weight"], s["u_p"], s["v_p"]
+    if "rho_d" in s:
+        ambient = np.float32(scene.ambient) * s["rho_d"].reshape(n_pixels, spp).mean(axis=1)
+    else:
+        ambient = np.zeros(n_pixels, dtype=np.float32)
     return Trace(
         height=height,
         width=width,

@@ -1,0 +1,166 @@
+"""Renderer speed: one pass for all frames vs Mitsuba's projector emitter, one render per frame.
+
+Renders the paper's 52-frame sequence of the default scene (100 mm sphere at 1 m before a
+wall) with the default rig (960 x 960 camera, 4 spp) two ways in one run, prints frames/s of
+each, their ratio, the mean absolute difference between the two images of each frame, and,
+separately, what writing the capture to disk costs.
+
+    PYTHONPATH=src python benchmarks/bench_render.py [--repeats 5] [--json out.json]
+
+Not a test: numbers depend on the machine (quote them with its description).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from virtus.capture import GT_NAMES, write_frames
+from virtus.optics import default_rig
+from virtus.patterns import default_sequence
+from virtus.render import Sensor, render, synthesize, trace
+from virtus.render.reference import ReferenceRenderer
+from virtus.scene import default_scene
+
+
+def timed(function, repeats: int) -> tuple[list[float], object]:
+    times, result = [], None
+    for _ in range(repeats):
+        start = time.perf_counter()
+        result = function()
+        times.append(time.perf_counter() - start)
+    return times, result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=5, help="timed runs of our renderer")
+    parser.add_argument("--spp", type=int, default=4)
+    parser.add_argument("--lookup", default="nearest", choices=["nearest", "bilinear"])
+    parser.add_argument("--json", type=Path, help="also write the numbers here")
+    args = parser.parse_args()
+
+    rig, scene, sequence = default_rig(), default_scene(), default_sequence()
+    n_frames = len(sequence)
+    report: dict[str, object] = {
+        "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+        f"{platform.system()}",
+        "frames": n_frames,
+        "camera_px": [rig.camera.width, rig.camera.height],
+        "spp": args.spp,
+        "lookup": args.lookup,
+    }
+
+    # ---- ours: one pass, all frames, into memory (uint8) ----
+    def ours():
+        return render(rig, scene, sequence, spp=args.spp, lookup=args.lookup)
+
+    warm = ours()  # compiles Dr.Jit kernels, caches camera rays
+    report["variant"] = warm.variant
+    times, _ = timed(ours, args.repeats)
+    # Stage split of one more run.
+    start = time.perf_counter()
+    traced = trace(rig, scene, spp=args.spp)
+    traced_s = time.perf_counter() - start
+    sensor = Sensor()
+    exposure = sensor.exposure_for(traced.white)
+    start = time.perf_counter()
+    synthesize(
+        traced,
+        sequence,
+        args.lookup,
+        transform=lambda b, f, p: sensor.digitize(b, exposure),
+        dtype=np.uint8,
+    )
+    synth_s = time.perf_counter() - start
+    report["ours_s"] = {
+        "best": min(times),
+        "median": statistics.median(times),
+        "trace": traced_s,
+        "synthesis_and_sensor": synth_s,
+    }
+    ours_fps = n_frames / statistics.median(times)
+    report["ours_frames_per_s"] = ours_fps
+
+    # ---- Mitsuba: projector emitter, one render per frame, same spp ----
+    mitsuba = ReferenceRenderer(rig, scene, spp=args.spp, lookup=args.lookup)
+    mitsuba.render_image(sequence.image(0))  # warm-up (kernel compilation)
+    start = time.perf_counter()
+    reference = mitsuba.render_frames(sequence)
+    mitsuba_s = time.perf_counter() - start
+    mitsuba_fps = n_frames / mitsuba_s
+    report["mitsuba_s"] = mitsuba_s
+    report["mitsuba_frames_per_s"] = mitsuba_fps
+    report["speedup"] = ours_fps / mitsuba_fps
+
+    # ---- agreement on the same frames (radiance, before the sensor) ----
+    radiance = synthesize(traced, sequence, args.lookup)
+    relative = [
+        float(np.abs(radiance[i] - reference[i]).mean() / reference[i].mean())
+        for i in range(n_frames)
+        if reference[i].mean() > 0
+    ]
+    report["mad_rel_jittered"] = {"mean": float(np.mean(relative)), "max": float(np.max(relative))}
+    same_points = ReferenceRenderer(rig, scene, spp=args.spp, lookup=args.lookup, jitter=False)
+    check = [0, 25, 50]
+    unjittered = same_points.render_frames(sequence, check)
+    report["mad_rel_same_sample_positions"] = max(
+        float(np.abs(radiance[i] - unjittered[k]).mean() / unjittered[k].mean())
+        for k, i in enumerate(check)
+    )
+
+    # ---- writing a capture: PNG frames and ground-truth arrays ----
+    with tempfile.TemporaryDirectory() as folder:
+        png = {}
+        for level in (0, 1, 3):
+            start = time.perf_counter()
+            paths = write_frames(Path(folder) / f"png{level}", warm.frames, compression=level)
+            png[level] = {
+                "s": time.perf_counter() - start,
+                "mb": sum(p.stat().st_size for p in paths) / 1e6,
+            }
+        start = time.perf_counter()
+        arrays = warm.gt.arrays()
+        for name in GT_NAMES:
+            np.save(Path(folder) / f"{name}.npy", arrays[name])
+        gt_s = time.perf_counter() - start
+    report["png_write"] = png
+    report["gt_write_s"] = gt_s
+
+    print(f"machine: {report['machine']}; Mitsuba variant {report['variant']}")
+    print(
+        f"{n_frames} frames, {rig.camera.width} x {rig.camera.height} px, {args.spp} spp, "
+        f"{args.lookup} lookup"
+    )
+    print(
+        f"virtus (one pass):     {ours_fps:7.1f} frames/s  (median {statistics.median(times):.3f} s"
+        f", best {min(times):.3f} s; trace {traced_s:.3f} s + synthesis/sensor {synth_s:.3f} s)"
+    )
+    print(f"Mitsuba (per frame):   {mitsuba_fps:7.2f} frames/s  ({mitsuba_s:.1f} s)")
+    print(f"speed-up:              {ours_fps / mitsuba_fps:7.1f} x")
+    print(
+        f"mean |difference| / mean radiance, Mitsuba jittered sampler: "
+        f"mean {report['mad_rel_jittered']['mean']:.4f}, "
+        f"max {report['mad_rel_jittered']['max']:.4f}"
+        f"; same sample positions: {report['mad_rel_same_sample_positions']:.1e}"
+    )
+    for level, info in png.items():
+        print(
+            f"write PNG (level {level}):  {info['s']:.2f} s for {n_frames} frames, "
+            f"{info['mb']:.1f} MB ({n_frames / info['s']:.0f} frames/s)"
+        )
+    print(f"write ground truth:    {gt_s:.2f} s ({len(GT_NAMES)} .npy arrays)")
+    if args.json:
+        args.json.write_text(json.dumps(report, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()
