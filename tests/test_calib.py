@@ -118,6 +118,7 @@ def test_board_texture_has_the_circles_area_and_their_centroids():
     ("kwargs", "name"),
     [
         ({"rows": 1}, "rows"),
+        ({"cols": 8}, "odd number of columns"),
         ({"circle_diameter_mm": 35}, "circle_diameter_mm"),
         ({"plane_size_m": (0.05, 0.05), "border_mm": 0}, "plane_size_m"),
         ({"circle_level": 1.0}, "circle_level"),

@@ -43,7 +43,9 @@ class CircleBoard:
     Parameters
     ----------
     rows : circles per column (R, >= 2).
-    cols : number of columns (C, >= 3); the columns alternate between two heights.
+    cols : number of columns (C, odd, >= 3); the columns alternate between two heights.
+        An odd C makes the grid asymmetric under a half turn, so its orientation and the
+        order of its circles are unambiguous.
     circle_diameter_mm : D_circle of the printed pattern, millimetres.
     center_distance_mm : D_centers, distance between neighbouring circles of one column, mm.
     border_mm : L_b, the white border of the printed pattern, mm.
@@ -66,6 +68,10 @@ class CircleBoard:
     def __post_init__(self) -> None:
         positive_int("rows", self.rows, 2)
         positive_int("cols", self.cols, 3)
+        if self.cols % 2 == 0:
+            # With an even number of columns the grid is symmetric under a half turn, so
+            # its orientation (and the order of the circles) would be ambiguous.
+            raise InputError("cols", "an odd number of columns (e.g. 7, 9, 13)", self.cols)
         positive("circle_diameter_mm", self.circle_diameter_mm)
         positive("center_distance_mm", self.center_distance_mm)
         if self.border_mm < 0:

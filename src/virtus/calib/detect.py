@@ -71,7 +71,6 @@ def _order_candidates(board: CircleBoard) -> list[np.ndarray]:
         idx[::-1, :],
         idx[:, ::-1],
         idx[::-1, ::-1],
-        idx.ravel()[::-1].reshape(board.cols, board.rows),
     ]
 
 

@@ -83,16 +83,18 @@ def _print_summary(console: Any, data: dict[str, Any]) -> None:
     if truth is None:
         return
     table = Table(title="calibrated - true")
-    for column in ("device", "fx %", "fy %", "cx px", "cy px"):
+    for column in ("device", "fx %", "fy %", "cx px", "cy px", "k1, k2, p1, p2"):
         table.add_column(column, justify="right")
     for device in ("camera", "projector"):
         e = truth[device]
+        dist = ", ".join(f"{d:+.1e}" for d in e["dist_error"][:4])
         table.add_row(
             device,
             f"{100 * e['fx_rel_error']:+.4f}",
             f"{100 * e['fy_rel_error']:+.4f}",
             f"{e['cx_error_px']:+.3f}",
             f"{e['cy_error_px']:+.3f}",
+            dist,
         )
     console.print(table)
     ext = truth["proj2cam"]
