@@ -64,7 +64,7 @@ def test_empty_cloud_round_trips(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("content", "message"),
     [
-        (b"", "not a PLY"),
+        (b"", "empty file"),
         (b"solid cube\nendsolid\n", "not a PLY"),
         (b"ply\nformat binary_little_endian 1.0\nelement vertex 2\n", "end_header"),
         (

@@ -7,6 +7,7 @@ from tests.tolerances import TRIANGULATION_M
 from virtus.errors import InputError
 from virtus.optics import Camera, Intrinsics, Projector, Rig, default_rig
 from virtus.reconstruct import (
+    depth_edge_mask,
     depth_map,
     normals_from_points,
     points_from_decoded,
@@ -44,7 +45,7 @@ def _correspondences(rig: Rig, points: np.ndarray) -> tuple[np.ndarray, np.ndarr
 @pytest.mark.parametrize("use", ["uv", "u", "v"])
 def test_exact_correspondences_return_the_points(distorted: bool, use: str) -> None:
     rig = _distorted_rig() if distorted else default_rig()
-    points = _random_points(np.random.default_rng(1), 20_000)
+    points = _random_points(np.random.default_rng(1), 5_000)
     cam_px, proj_uv = _correspondences(rig, points)
     out = triangulate(rig, cam_px, proj_uv, use=use)
     assert np.isfinite(out).all()
@@ -86,14 +87,16 @@ def test_point_behind_the_devices_is_nan() -> None:
 
 def test_image_functions_on_a_plane() -> None:
     """A fronto-parallel plane at 0.9 m: depth map is 0.9 everywhere it is lit."""
-    rig = _distorted_rig()
+    full = _distorted_rig()
+    # A quarter-resolution camera keeps the test fast; the maths is per pixel.
+    rig = Rig(Camera(full.camera.intrinsics.scaled(0.25)), full.projector, full.proj2cam)
     intr = rig.camera.intrinsics
     rays = intr.unproject(intr.pixel_grid().reshape(-1, 2))
     points = rays * (0.9 / rays[:, 2:3])
     proj_uv = rig.projector.intrinsics.project(rig.cam2proj.apply(points))
     proj_uv = proj_uv.reshape(intr.height, intr.width, 2)
     mask = np.zeros((intr.height, intr.width), dtype=bool)
-    mask[100:-100, 50:-50] = True
+    mask[25:-25, 12:-12] = True
     depth = depth_map(rig, proj_uv, mask)
     assert np.isnan(depth[~mask]).all()
     assert np.max(np.abs(depth[mask] - 0.9)) < TRIANGULATION_M
@@ -120,3 +123,22 @@ def test_bad_input_names_the_argument() -> None:
         points_from_decoded(rig, np.zeros((10, 10, 2)))
     with pytest.raises(InputError, match="mask"):
         points_from_decoded(rig, np.zeros((960, 960, 2)), mask=np.ones((960, 960)))
+
+
+def test_depth_edge_mask_flags_both_sides_of_a_jump() -> None:
+    rig = default_rig()
+    fx = rig.camera.intrinsics.fx
+    intr = rig.camera.intrinsics
+    rays = intr.unproject(intr.pixel_grid().reshape(-1, 2)).reshape(intr.height, intr.width, 3)
+    depth = np.where(np.arange(intr.width)[None, :] < 400, 1.0, 1.3)  # a step at column 400
+    points = rays * (depth / rays[..., 2])[..., None]
+    # A steep but continuous slope (80 deg from the view direction) is not an edge.
+    slope = rays * ((1.0 + np.arange(intr.width)[None, :] * 5.7 / fx) / rays[..., 2])[..., None]
+    edges = depth_edge_mask(points, fx)
+    assert edges[:, 399].all() and edges[:, 400].all()
+    assert edges.sum() == 2 * intr.height
+    assert not depth_edge_mask(slope, fx).any()
+    points[10, 10] = np.nan  # invalid neighbours are not edges
+    assert not depth_edge_mask(points, fx)[9:12, 9:12].any()
+    with pytest.raises(InputError, match="focal_px"):
+        depth_edge_mask(points, 0.0)

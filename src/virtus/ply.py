@@ -157,6 +157,8 @@ def read_ply(path: str | os.PathLike[str]) -> PointCloud:
     source = Path(path)
     with open(source, "rb") as stream:
         raw = stream.read()
+    if not raw:
+        raise PlyError(f"{source}: empty file (0 bytes), not a PLY file")
     if not raw.startswith(b"ply\n") and not raw.startswith(b"ply\r\n"):
         raise PlyError(f"{source}: not a PLY file (it does not start with 'ply')")
     end = raw.find(b"end_header")

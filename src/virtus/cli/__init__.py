@@ -25,9 +25,29 @@ app = typer.Typer(
 
 def _register_commands() -> None:
     # One module per sub-command (import order = order in --help).
-    from virtus.cli import calibrate_cmd, capture_cmd, patterns_cmd, rig_cmd
+    from virtus.cli import (
+        calibrate_cmd,
+        capture_cmd,
+        decode_cmd,
+        demo_cmd,
+        evaluate_cmd,
+        patterns_cmd,
+        reconstruct_cmd,
+        rig_cmd,
+        scan_cmd,
+    )
 
-    for module in (rig_cmd, patterns_cmd, calibrate_cmd, capture_cmd):
+    for module in (
+        demo_cmd,
+        rig_cmd,
+        patterns_cmd,
+        calibrate_cmd,
+        capture_cmd,
+        decode_cmd,
+        reconstruct_cmd,
+        scan_cmd,
+        evaluate_cmd,
+    ):
         module.register(app)
 
 

@@ -47,35 +47,42 @@ def lookup_matrix(
     weight : (P, S) float32 radiance weight of each sample (0 = no contribution).
     length : projector width (for u_p) or height (for v_p) in pixels.
     lookup : ``"nearest"`` or ``"bilinear"`` (see the module docstring).
+
+    Every sample keeps its entries (S per row for nearest, 2 S for bilinear), zero weights
+    included: a fixed row length needs no compaction pass and costs little in the product.
     """
     if lookup not in LOOKUPS:
         raise InputError("lookup", f"one of {LOOKUPS}", lookup)
-    n_pixels = coordinate.shape[0]
-    used = weight != 0
-    counts = used.sum(axis=1)
-    w = weight[used]
-    c = coordinate[used]
+    n_pixels, n_samples = coordinate.shape
+    c = coordinate.reshape(-1)
+    w = weight.reshape(-1).astype(np.float32, copy=False)
     if lookup == "nearest":
-        columns = np.clip(np.floor(c + np.float32(0.5)), 0, length - 1).astype(np.int32)
+        columns = np.floor(c + np.float32(0.5)).astype(np.int32)
+        np.clip(columns, 0, length - 1, out=columns)  # float32 rounding at the last edge
         data = w
-        per_row = counts
     else:
         x = np.clip(c, np.float32(0.0), np.float32(length - 1))
-        left = (
-            np.minimum(np.floor(x), length - 2).astype(np.int32)
-            if length > 1
-            else (np.zeros(x.shape, np.int32))
-        )
-        frac = (x - left).astype(np.float32) if length > 1 else np.zeros_like(x)
-        # Interleave (left, right) per sample so rows stay contiguous in CSR order.
-        columns = np.stack([left, np.minimum(left + 1, length - 1)], axis=1).ravel()
-        data = np.stack([w * (1 - frac), w * frac], axis=1).ravel()
-        per_row = 2 * counts
-    indptr = np.zeros(n_pixels + 1, dtype=np.int64)
-    np.cumsum(per_row, out=indptr[1:])
-    return scipy.sparse.csr_array(
-        (data.astype(np.float32, copy=False), columns, indptr), shape=(n_pixels, length)
+        left = np.floor(x).astype(np.int32)
+        np.minimum(left, max(length - 2, 0), out=left)
+        frac = x - left
+        # Interleave (left, right) per sample so each row's entries stay together.
+        columns = np.empty(2 * c.size, dtype=np.int32)
+        columns[0::2] = left
+        columns[1::2] = np.minimum(left + 1, length - 1)
+        data = np.empty(2 * c.size, dtype=np.float32)
+        data[1::2] = w * frac
+        data[0::2] = w - data[1::2]
+    per_row = data.size // n_pixels
+    index_dtype = np.int32 if data.size < 2**31 else np.int64
+    indptr = np.arange(0, data.size + 1, per_row, dtype=index_dtype)
+    matrix = scipy.sparse.csr_array((n_pixels, length), dtype=np.float32)
+    # Assign the CSR arrays directly: the constructor would re-check and copy them.
+    matrix.data, matrix.indices, matrix.indptr = (
+        data,
+        columns.astype(index_dtype, copy=False),
+        indptr,
     )
+    return matrix
 
 
 def _threads() -> int:
@@ -162,7 +169,7 @@ def synthesize(
         profiles = _profiles(sequence, rows, lengths[direction])
         _fill_direction(out, rows, matrix, profiles, ambient, transform)
     if groups[None]:
-        white = trace.weight.sum(axis=1)
+        white = trace.direct
         for index in groups[None]:
             level = np.asarray(sequence.profile(index), dtype=np.float32).reshape(-1)
             if level.shape != (1,):
