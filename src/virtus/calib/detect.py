@@ -16,7 +16,8 @@ import cv2
 import numpy as np
 
 from virtus.calib.board import CircleBoard
-from virtus.checks import as_float_array, as_points
+from virtus.checks import as_points
+from virtus.errors import InputError
 
 #: Darkness window around each circle, as fractions of D_centers in the board plane: the
 #: circle plus this margin (its blurred edge: ~3 px at 1 m for the 7x13 default board) ...
@@ -74,13 +75,18 @@ def _order_candidates(board: CircleBoard) -> list[np.ndarray]:
     ]
 
 
-def _homography(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """Least-squares homography (3, 3) mapping src (N, 2) to dst (N, 2)."""
+def fit_homography(src: np.ndarray, dst: np.ndarray) -> np.ndarray | None:
+    """Least-squares homography (3, 3) mapping points src (N, 2) to dst (N, 2), N >= 4.
+
+    ``cv2.findHomography`` without RANSAC (DLT + Levenberg-Marquardt on the transfer
+    error); ``None`` if it fails (degenerate points).
+    """
     H, _ = cv2.findHomography(src.astype(np.float64), dst.astype(np.float64), 0)
     return H
 
 
-def _apply_h(H: np.ndarray, points: np.ndarray) -> np.ndarray:  # noqa: N803
+def apply_homography(H: np.ndarray, points: np.ndarray) -> np.ndarray:  # noqa: N803
+    """Map points (N, 2) through a homography H (3, 3) -> (N, 2)."""
     p = np.column_stack([points, np.ones(len(points))]) @ H.T
     return p[:, :2] / p[:, 2:3]
 
@@ -97,10 +103,10 @@ def order_to_board(board: CircleBoard, centres: np.ndarray) -> np.ndarray | None
     for candidate in _order_candidates(board):
         ordered = np.empty_like(centres)
         ordered[candidate.ravel()] = centres
-        H = _homography(obj, ordered)  # noqa: N806
+        H = fit_homography(obj, ordered)  # noqa: N806
         if H is None:
             continue
-        rms = np.sqrt(np.mean(np.sum((_apply_h(H, obj) - ordered) ** 2, axis=1)))
+        rms = np.sqrt(np.mean(np.sum((apply_homography(H, obj) - ordered) ** 2, axis=1)))
         # Jacobian determinant of the homography at the board centre.
         h = H / H[2, 2]
         jac = np.linalg.det(h[:2, :2] - np.outer(h[:2, 2], h[2, :2]))
@@ -126,8 +132,8 @@ def find_grid(image: np.ndarray, board: CircleBoard) -> np.ndarray | None:
     the whole grid was not found.
     """
     image = np.asarray(image)
-    if image.ndim != 2:
-        as_float_array("image", image, (None, None))
+    if image.ndim != 2 or image.dtype.kind not in "uif":
+        raise InputError("image", "a (H, W) grey image", f"{image.dtype} of shape {image.shape}")
     gray = _to_uint8(image)
     found, centres = cv2.findCirclesGrid(
         gray,
@@ -169,8 +175,12 @@ def refine_centres(image: np.ndarray, board: CircleBoard, centres: np.ndarray) -
     """
     img = np.asarray(image, dtype=np.float64)
     centres = as_points("centres", centres, 2)
+    if len(centres) != board.n_points:
+        raise InputError("centres", f"{board.n_points} points (one per circle)", len(centres))
     obj = board.object_points[:, :2]
-    H = _homography(obj, centres)  # noqa: N806  board (m) -> image (px)
+    H = fit_homography(obj, centres)  # noqa: N806  board (m) -> image (px)
+    if H is None:
+        raise InputError("centres", "circle centres of the board's grid", "degenerate points")
     H_inv = np.linalg.inv(H)  # noqa: N806
     r_in, r_out = _window_radii(board)
     ring = np.linspace(0, 2 * np.pi, 32, endpoint=False)
@@ -178,14 +188,14 @@ def refine_centres(image: np.ndarray, board: CircleBoard, centres: np.ndarray) -
     out = np.full_like(centres, np.nan)
     height, width = img.shape
     for k, centre in enumerate(obj):
-        outline = _apply_h(H, centre + r_out * circle)
+        outline = apply_homography(H, centre + r_out * circle)
         lo = np.floor(outline.min(axis=0)).astype(int) - 1
         hi = np.ceil(outline.max(axis=0)).astype(int) + 1
         if lo.min() < 0 or hi[0] >= width or hi[1] >= height:
             continue
         vv, uu = np.mgrid[lo[1] : hi[1] + 1, lo[0] : hi[0] + 1]
         pix = np.stack([uu.ravel(), vv.ravel()], axis=1).astype(np.float64)
-        rho = np.linalg.norm(_apply_h(H_inv, pix) - centre, axis=1)
+        rho = np.linalg.norm(apply_homography(H_inv, pix) - centre, axis=1)
         values = img[vv.ravel(), uu.ravel()]
         inner = rho <= r_in
         bg = (rho > r_in) & (rho <= r_out)

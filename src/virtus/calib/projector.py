@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from virtus.calib.board import CircleBoard
-from virtus.calib.detect import _apply_h, _homography
+from virtus.calib.detect import apply_homography, fit_homography
 from virtus.checks import as_float_array, as_points
 from virtus.errors import InputError
 
@@ -64,8 +64,12 @@ def local_homographies(
     """
     uv = as_float_array("proj_uv", proj_uv, (None, None, 2), allow_nan=True)
     anchors = as_points("cam_centres", cam_centres, 2)
+    if len(anchors) != board.n_points:
+        raise InputError("cam_centres", f"{board.n_points} points (one per circle)", len(anchors))
     obj = board.object_points[:, :2]
-    H = _homography(obj, anchors)  # noqa: N806  board (m) -> camera px
+    H = fit_homography(obj, anchors)  # noqa: N806  board (m) -> camera px
+    if H is None:
+        raise InputError("cam_centres", "circle centres of the board's grid", "degenerate points")
     H_inv = np.linalg.inv(H)  # noqa: N806
     r_out = projector_window_radius(board)
     ring = np.linspace(0, 2 * np.pi, 32, endpoint=False)
@@ -73,14 +77,14 @@ def local_homographies(
     height, width = uv.shape[:2]
     out = np.full((len(anchors), 3, 3), np.nan)
     for k, centre in enumerate(obj):
-        outline = _apply_h(H, centre + r_out * circle)
+        outline = apply_homography(H, centre + r_out * circle)
         lo = np.maximum(np.floor(outline.min(axis=0)).astype(int), 0)
         hi = np.minimum(np.ceil(outline.max(axis=0)).astype(int), (width - 1, height - 1))
         if (hi < lo).any():
             continue
         vv, uu = np.mgrid[lo[1] : hi[1] + 1, lo[0] : hi[0] + 1]
         pix = np.stack([uu.ravel(), vv.ravel()], axis=1).astype(np.float64)
-        inside = np.linalg.norm(_apply_h(H_inv, pix) - centre, axis=1) <= r_out
+        inside = np.linalg.norm(apply_homography(H_inv, pix) - centre, axis=1) <= r_out
         target = uv[vv.ravel(), uu.ravel()]
         valid = inside & np.isfinite(target).all(axis=1)
         need = max(MIN_VALID_FRACTION * inside.sum(), 16)
@@ -95,7 +99,7 @@ def local_homographies(
         keep = mask.ravel().astype(bool)
         if keep.sum() < need:
             continue
-        local = _homography(src[keep], dst[keep])
+        local = fit_homography(src[keep], dst[keep])
         if local is None:
             continue
         shift = np.array([[1.0, 0.0, -anchors[k, 0]], [0.0, 1.0, -anchors[k, 1]], [0, 0, 1]])
