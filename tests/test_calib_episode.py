@@ -12,7 +12,7 @@ import pytest
 from tests import tolerances as tol
 from virtus.calib.board import board_from_spec
 from virtus.calib.detect import find_grid
-from virtus.calib.episode import BOARD_BLUR_M, board_scene, calibrate_rig
+from virtus.calib.episode import BOARD_BLUR_M, board_scene, calibrate_rig, recalibrate
 from virtus.calib.poses import BoardPose, paper_poses
 from virtus.errors import VirtusError
 from virtus.optics import Pose, Rig, default_rig
@@ -46,6 +46,10 @@ def test_paper_calibration_meets_the_issue_numbers(tmp_path):
         result.rig.baseline_m
     )
     assert len(list((tmp_path / "poses").glob("*.npz"))) == 18
+    # Solving again from the saved observations gives the same rig.
+    again = recalibrate(tmp_path)
+    np.testing.assert_allclose(again.rig.proj2cam.matrix, result.rig.proj2cam.matrix, atol=1e-12)
+    assert again.rms_px == pytest.approx(result.rms_px)
 
 
 @pytest.mark.parametrize("spec", ["4x7", "5x9", "7x13"])
@@ -83,8 +87,12 @@ def test_fewer_than_three_usable_poses_is_a_clear_error(tmp_path):
         warnings.simplefilter("ignore")
         with pytest.raises(VirtusError, match="at least 3 usable poses, got 2"):
             calibrate_rig(RIG, board=board, poses=poses, check_poses=False, out_dir=tmp_path)
-    # The finished poses were written before the failure.
+    # The finished poses were written before the failure, and can be solved again.
     assert len(list((tmp_path / "poses").glob("*.npz"))) == 3
+    (tmp_path / "poses" / "cut_off_right.npz").unlink()  # as if the run had stopped there
+    with pytest.warns(UserWarning, match="'cut_off_right' left out"):
+        with pytest.raises(VirtusError, match="got 2"):
+            recalibrate(tmp_path)
 
 
 def test_cli_calibrates_and_writes_the_files(tmp_path, capsys):

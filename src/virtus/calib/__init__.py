@@ -18,7 +18,7 @@ columns, y along its rows, z into the board; ``board2cam`` maps it into the came
 """
 
 from virtus.calib.board import CircleBoard, board_from_spec
-from virtus.calib.episode import CalibrationResult, calibrate_rig
+from virtus.calib.episode import CalibrationResult, calibrate_rig, recalibrate
 from virtus.calib.io import load_opencv_yaml, load_paper_txt, save_opencv_yaml, save_paper_txt
 from virtus.calib.poses import BoardPose, paper_poses, pose_set, random_poses
 from virtus.calib.solve import PoseObservation, calibrate_observations
@@ -37,6 +37,7 @@ __all__ = [
     "paper_poses",
     "pose_set",
     "random_poses",
+    "recalibrate",
     "save_opencv_yaml",
     "save_paper_txt",
     "truth_error",

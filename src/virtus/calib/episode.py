@@ -9,14 +9,17 @@
    frame and refined on the mean of the phase-shift frames; the sequence is decoded to
    projector coordinates and a local camera->projector homography is fitted around every
    circle.
-3. Each finished pose is written to ``out_dir/poses/<name>.npz`` at once (a late failure
-   never loses finished poses), then everything is calibrated (:mod:`virtus.calib.solve`)
-   and compared with the true rig (:mod:`virtus.calib.truth`).
+3. The run's inputs go to ``out_dir/episode.json`` first and each finished pose to
+   ``out_dir/poses/<name>.npz`` at once, so a late failure never loses finished poses
+   (:func:`recalibrate` solves again from them); then everything is calibrated
+   (:mod:`virtus.calib.solve`) and compared with the true rig (:mod:`virtus.calib.truth`).
 """
 
 from __future__ import annotations
 
+import json
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -45,6 +48,8 @@ BOARD_BLUR_M = 2e-4
 BOARD_TEXEL_M = 1e-4
 #: Name of the result file in the output directory.
 CALIBRATION_FILE = "calibration.json"
+#: Inputs of a run (true rig, board, poses, settings), written before the capture starts.
+EPISODE_FILE = "episode.json"
 
 #: Progress callback: (poses done, poses total, name of the pose just finished).
 Progress = Callable[[int, int, str], None]
@@ -157,14 +162,24 @@ def observe_pose(
 
 def _save_observation(directory: Path, pose: BoardPose, obs: PoseObservation) -> None:
     directory.mkdir(parents=True, exist_ok=True)
-    arrays: dict[str, np.ndarray] = {
-        "board2cam": pose.board2cam.matrix,
-        "detected": np.array(obs.cam_centroids is not None),
-    }
+    arrays: dict[str, np.ndarray] = {"board2cam": pose.board2cam.matrix}
     if obs.cam_centroids is not None:
         arrays["cam_centroids"] = obs.cam_centroids
+    if obs.homographies is not None:
         arrays["homographies"] = obs.homographies
-    np.savez(directory / f"{pose.name}.npz", **arrays)
+    # Write then rename, so an interrupted run never leaves a truncated pose file.
+    partial = directory / f"{pose.name}.partial.npz"
+    np.savez(partial, **arrays)
+    partial.replace(directory / f"{pose.name}.npz")
+
+
+def _load_observation(path: Path, name: str) -> PoseObservation:
+    with np.load(path) as data:
+        return PoseObservation(
+            name,
+            data["cam_centroids"] if "cam_centroids" in data else None,
+            data["homographies"] if "homographies" in data else None,
+        )
 
 
 def calibrate_rig(
@@ -221,10 +236,33 @@ def calibrate_rig(
     proj = true_rig.projector.intrinsics
     sequence = default_sequence(proj.width, proj.height)
     texture = board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=BOARD_BLUR_M)
-    pose_dir = None if out_dir is None else Path(out_dir) / "poses"
+    timing = {"render_s": 0.0, "observe_s": 0.0, "calibrate_s": 0.0}
+    settings: dict[str, Any] = {
+        "poses": poses if isinstance(poses, str) else "custom",
+        "n_poses": len(pose_list),
+        "frames_per_pose": len(sequence),
+        "spp": spp,
+        "seed": seed,
+        "fix_intrinsics": fix_intrinsics,
+        "board_blur_m": BOARD_BLUR_M,
+        "board_texel_m": BOARD_TEXEL_M,
+        "timing_s": timing,
+    }
+    pose_dir = None
+    if out_dir is not None:
+        # The run's inputs first, so finished poses can be recalibrated after any failure.
+        pose_dir = Path(out_dir) / "poses"
+        save_json(
+            {
+                "true_rig": true_rig.to_dict(),
+                "board": board.to_dict(),
+                "poses": [p.to_dict() for p in pose_list],
+                "settings": settings,
+            },
+            Path(out_dir) / EPISODE_FILE,
+        )
 
     observations = []
-    timing = {"render_s": 0.0, "observe_s": 0.0, "calibrate_s": 0.0}
     for index, pose in enumerate(pose_list):
         start = time.perf_counter()
         rendering = render(true_rig, board_scene(board, pose, texture), sequence, spp=spp)
@@ -238,6 +276,17 @@ def calibrate_rig(
         if progress is not None:
             progress(index + 1, len(pose_list), pose.name)
 
+    return _solve_episode(true_rig, board, pose_list, observations, settings, out_dir)
+
+
+def _solve_episode(
+    true_rig: Rig,
+    board: CircleBoard,
+    pose_list: list[BoardPose],
+    observations: list[PoseObservation],
+    settings: dict[str, Any],
+    out_dir: str | Path | None,
+) -> CalibrationResult:
     start = time.perf_counter()
     cam, prj = true_rig.camera.intrinsics, true_rig.projector.intrinsics
     solved: StereoCalibration = calibrate_observations(
@@ -245,9 +294,9 @@ def calibrate_rig(
         observations,
         (cam.width, cam.height),
         (prj.width, prj.height),
-        fix_intrinsics=fix_intrinsics,
+        fix_intrinsics=settings["fix_intrinsics"],
     )
-    timing["calibrate_s"] = time.perf_counter() - start
+    settings["timing_s"]["calibrate_s"] = time.perf_counter() - start
     result = CalibrationResult(
         rig=solved.rig,
         rms_px=solved.rms_px,
@@ -256,18 +305,41 @@ def calibrate_rig(
         board=board,
         poses=pose_list,
         dropped_poses=solved.dropped_poses,
-        settings={
-            "poses": poses if isinstance(poses, str) else "custom",
-            "n_poses": len(pose_list),
-            "frames_per_pose": len(sequence),
-            "spp": spp,
-            "seed": seed,
-            "fix_intrinsics": fix_intrinsics,
-            "board_blur_m": BOARD_BLUR_M,
-            "timing_s": timing,
-        },
+        settings=settings,
         true_rig=true_rig,
     )
     if out_dir is not None:
         result.save(Path(out_dir))
     return result
+
+
+def recalibrate(out_dir: str | Path, *, fix_intrinsics: bool | None = None) -> CalibrationResult:
+    """Calibrate again from the observations a :func:`calibrate_rig` run saved.
+
+    Uses ``out_dir/episode.json`` and every finished ``out_dir/poses/<name>.npz`` (poses
+    whose file is missing, e.g. after an interrupted run, are left out with a warning), and
+    rewrites ``out_dir/calibration.json``.
+
+    Parameters
+    ----------
+    out_dir : the ``out_dir`` of the run.
+    fix_intrinsics : override the run's stereo option (default: as in the run).
+    """
+    out_dir = Path(out_dir)
+    episode = json.loads((out_dir / EPISODE_FILE).read_text())
+    true_rig = Rig.from_dict(episode["true_rig"])
+    board = CircleBoard.from_dict(episode["board"])
+    settings = dict(episode["settings"])
+    if fix_intrinsics is not None:
+        settings["fix_intrinsics"] = bool(fix_intrinsics)
+    settings["timing_s"] = {"render_s": 0.0, "observe_s": 0.0, "calibrate_s": 0.0}
+    pose_list, observations = [], []
+    for item in episode["poses"]:
+        pose = BoardPose.from_dict(item)
+        path = out_dir / "poses" / f"{pose.name}.npz"
+        if not path.is_file():
+            warnings.warn(f"calibration: pose {pose.name!r} left out: {path} missing", stacklevel=2)
+            continue
+        pose_list.append(pose)
+        observations.append(_load_observation(path, pose.name))
+    return _solve_episode(true_rig, board, pose_list, observations, settings, out_dir)

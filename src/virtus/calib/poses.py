@@ -90,6 +90,13 @@ class BoardPose:
     def to_dict(self) -> dict:
         return {"name": self.name, "board2cam": self.board2cam.to_dict()}
 
+    @classmethod
+    def from_dict(cls, data: dict) -> BoardPose:
+        """Inverse of :meth:`to_dict`."""
+        if not isinstance(data, dict) or "name" not in data or "board2cam" not in data:
+            raise InputError("pose", "an object with name and board2cam", data)
+        return cls(str(data["name"]), Pose.from_dict(data["board2cam"], "board2cam"))
+
 
 def _edge_points(board: CircleBoard, per_side: int = 16) -> np.ndarray:
     """Points along the plane's outline, (4 * per_side, 3), board frame (curved by distortion)."""
