@@ -8,10 +8,12 @@ from typing import Any, Literal
 import numpy as np
 
 from virtus.checks import as_rng
+from virtus.errors import InputError
 from virtus.optics import Pose, Rig
 from virtus.render.groundtruth import GroundTruth
 from virtus.render.sensor import Sensor
 from virtus.render.synthesis import synthesize
+from virtus.render.synthesis_jit import synthesize_digital
 from virtus.render.tracing import trace
 from virtus.scene import Scene
 
@@ -63,6 +65,7 @@ def render(
     rng: np.random.Generator | int | None = None,
     cam2world: Pose | None = None,
     sensor: Sensor | None = None,
+    synthesis: Literal["auto", "sparse", "jit"] = "auto",
 ) -> Rendering:
     """Render every frame of ``sequence`` for one pose from a single ray-tracing pass.
 
@@ -80,23 +83,33 @@ def render(
     rng : randomness for the sensor stage (noise-free today; kept for determinism).
     cam2world : camera pose in the scene's world frame (default identity).
     sensor : a full :class:`Sensor` (overrides ``exposure`` and ``bit_depth``).
+    synthesis : where frames are synthesised: ``"sparse"`` (scipy sparse products on the
+        host, fastest on CPUs), ``"jit"`` (Dr.Jit gathers where Mitsuba runs, fastest on
+        GPUs), ``"auto"`` (``"jit"`` for CUDA variants, else ``"sparse"``). Same frames.
 
     Returns
     -------
     :class:`Rendering` with frames (F, H, W) and ground truth.
     """
     sensor = sensor or Sensor(bit_depth=bit_depth, exposure=exposure)
+    if synthesis not in ("auto", "sparse", "jit"):
+        raise InputError("synthesis", '"auto", "sparse" or "jit"', synthesis)
     generator = as_rng(rng)
     traced = trace(rig, scene, spp=spp, cam2world=cam2world, variant=variant)
     exposure_value = sensor.exposure_for(traced.white)
-    # The sensor is pointwise, so it runs on each synthesised block (no float frame stack).
-    frames = synthesize(
-        traced,
-        sequence,
-        lookup,
-        transform=lambda block, frames, pixels: sensor.digitize(block, exposure_value, generator),
-        dtype=sensor.dtype,
-    )
+    if synthesis == "jit" or (synthesis == "auto" and traced.variant.startswith("cuda")):
+        frames = synthesize_digital(traced, sequence, lookup, sensor, exposure_value)
+    else:
+        # The sensor is pointwise, so it runs on each synthesised block (no float stack).
+        frames = synthesize(
+            traced,
+            sequence,
+            lookup,
+            transform=lambda block, frames, pixels: sensor.digitize(
+                block, exposure_value, generator
+            ),
+            dtype=sensor.dtype,
+        )
     return Rendering(
         frames=frames,
         gt=traced.gt,

@@ -13,7 +13,8 @@ over the pixels that receive light reaches ``auto_target`` of full scale.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from types import ModuleType
+from typing import Any, Literal
 
 import numpy as np
 
@@ -90,6 +91,11 @@ class Sensor:
         np.rint(values, out=values)
         np.clip(values, 0, self.full_scale, out=values)
         return values.astype(self.dtype)
+
+    def digitize_jit(self, radiance: Any, exposure: float, dr: ModuleType) -> Any:
+        """:meth:`digitize` on a Dr.Jit Float array (on the device that traced it); returns a
+        Float of whole digital numbers in [0, full scale]."""
+        return dr.clip(dr.round(radiance * float(exposure)), 0.0, float(self.full_scale))
 
     def capture(
         self,

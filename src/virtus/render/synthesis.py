@@ -93,7 +93,8 @@ def _threads() -> int:
         return os.cpu_count() or 1
 
 
-def _frame_groups(sequence: Any) -> dict[str | None, list[int]]:
+def frame_groups(sequence: Any) -> dict[str | None, list[int]]:
+    """Frame indices by direction: ``{"v": [...], "h": [...], None: [uniform frames]}``."""
     groups: dict[str | None, list[int]] = {"v": [], "h": [], None: []}
     for index, frame in enumerate(sequence.frames):
         direction = getattr(frame, "direction", None)
@@ -159,7 +160,7 @@ def synthesize(
     transform = transform or (lambda block, frames, pixels: block)
     ambient = trace.ambient if np.any(trace.ambient) else None
     out = np.empty((n_frames, n_pixels), dtype=dtype)
-    groups = _frame_groups(sequence)
+    groups = frame_groups(sequence)
     lengths = {"v": trace.projector_width, "h": trace.projector_height}
     for direction, coordinate in (("v", trace.u_p), ("h", trace.v_p)):
         rows = groups[direction]
