@@ -155,3 +155,20 @@ def test_cli_evaluate_errors(
     assert done.value.code == 2
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_cli_turntable_with_refinement(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "tt"
+    argv = ["scan", "--scene", "freeform", "--out", str(out), "--turntable", "2", "--refine",
+            "--spp", "1", "--lookup", "bilinear"]  # fmt: skip
+    with pytest.raises(SystemExit) as done:
+        main(argv)
+    assert done.value.code == 0
+    assert "C2M MAE" in capsys.readouterr().out
+    report = json.loads((out / "turntable.json").read_text())
+    assert report["n_views"] == 2 and report["refine"] is True
+    # True rig and known poses: the per-view ICP refinement moves each view very little.
+    for angle_deg, shift_mm in report["refinement_deg_mm"]:
+        assert angle_deg < 0.01 and shift_mm < 0.01
+    assert (out / "view_0" / "capture.json").is_file() and (out / "merged.ply").is_file()
