@@ -5,7 +5,9 @@ One ray-tracing pass per pose, every frame of a pattern sequence synthesised fro
 * :mod:`~virtus.render.backend` -- Mitsuba variant choice (CUDA if it works, else LLVM).
 * :mod:`~virtus.render.mitsuba_scene` -- virtus scene -> Mitsuba shapes and BSDFs.
 * :mod:`~virtus.render.tracing` -- camera rays, hits, projector coordinates, shading.
-* :mod:`~virtus.render.synthesis` -- all frames from the trace (sparse lookups).
+* :mod:`~virtus.render.synthesis` -- all frames from the trace (sparse lookups, host).
+* :mod:`~virtus.render.synthesis_jit` -- the same with Dr.Jit gathers on the device
+  (used with CUDA variants).
 * :mod:`~virtus.render.sensor` -- exposure and quantisation to 8/16-bit frames.
 * :mod:`~virtus.render.groundtruth` -- depth, points, normals, projector coordinates, masks.
 * :mod:`~virtus.render.reference` -- Mitsuba's own projector emitter, one render per frame
