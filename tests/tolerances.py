@@ -100,6 +100,9 @@ CALIB_HOMOGRAPHY_STAIRCASE_RMS_PX = 0.02
 CALIB_EXACT_RMS_PX = 1e-3
 CALIB_EXACT_FOCAL_REL = 1e-6
 CALIB_EXACT_PRINCIPAL_POINT_PX = 0.01
+#: recalibrating from saved observations: the same float64 inputs, but OpenCV's threaded
+#: reductions may sum in another order (measured differences 6e-12 in proj2cam entries).
+CALIB_RECALIBRATE_ATOL = 1e-9
 #: text files hold repr() floats; OpenCV YAML 17 significant digits: round trips are exact
 #: to double rounding.
 CALIB_FILE_ROUND_TRIP = 1e-12
