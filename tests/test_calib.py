@@ -405,3 +405,22 @@ def test_cli_rejects_a_bad_board(capsys):
         main(["calibrate", "--board", "7by13", "--out", "unused"])
     assert exit_info.value.code == 2
     assert "board: expected 'ROWSxCOLS'" in capsys.readouterr().err
+
+
+def test_random_poses_refuse_a_board_larger_than_the_field():
+    huge = CircleBoard(rows=4, cols=7, plane_size_m=(0.6, 0.6))
+    with pytest.raises(VirtusError, match="no random pose inside the common field"):
+        random_poses(RIG, huge, 1, rng=0, max_tries=20)
+    with pytest.raises(VirtusError, match="front_1000"):
+        paper_poses(RIG, huge)
+
+
+def test_calibration_file_errors_are_clear(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        load_paper_txt(tmp_path)
+    save_paper_txt(_distorted_rig(), tmp_path)
+    (tmp_path / "ProjRotationMatrix.txt").write_text("1\t0\n0\t1\n")
+    with pytest.raises(InputError, match="9 numbers"):
+        load_paper_txt(tmp_path)
+    with pytest.raises(FileNotFoundError):
+        load_opencv_yaml(tmp_path / "missing.yaml")
