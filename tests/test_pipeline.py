@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.tolerances import C2M_MAE_M, PIPELINE_TRUE_RIG_M
+from tests.tolerances import C2M_MAE_M, PIPELINE_FORMAT_M, PIPELINE_TRUE_RIG_M
 from virtus.cli import main
 from virtus.errors import InputError, VirtusError
 from virtus.optics import default_rig
@@ -80,6 +80,13 @@ def test_reconstruct_with_a_calibration_file(freeform_scan: Path, tmp_path: Path
     (tmp_path / "small.json").write_text(json.dumps(small))
     with pytest.raises(VirtusError, match="480x960"):
         reconstruct_capture(freeform_scan, tmp_path / "small.json", tmp_path / "x.ply")
+    # The other calibration formats virtus calibrate writes: OpenCV YAML, the paper's txt.
+    from virtus.calib.io import save_opencv_yaml, save_paper_txt
+
+    for path in (save_opencv_yaml(default_rig(), tmp_path / "c.yaml"),
+                 save_paper_txt(default_rig(), tmp_path / "paper_txt")):  # fmt: skip
+        other = reconstruct_capture(freeform_scan, path, tmp_path / "other.ply")
+        assert np.nanmax(np.abs(other.points - reference)) < PIPELINE_FORMAT_M
     (tmp_path / "bad.txt").write_text("{}")
     with pytest.raises(InputError, match="calibration"):
         load_rig_file(tmp_path / "bad.txt")

@@ -35,6 +35,9 @@ TRIANGULATION_M = 1e-6
 #: sampling noise, ~10 um in depth at 1 m; 50 um would mean a systematic decoding or
 #: triangulation error.
 PIPELINE_TRUE_RIG_M = 5e-5
+#: the same capture reconstructed from the rig stored as OpenCV YAML or the paper's text files
+#: instead of JSON: those formats keep fewer digits (~1e-9 relative), i.e. nanometres.
+PIPELINE_FORMAT_M = 1e-6
 
 # --- render -----------------------------------------------------------------------------
 #: renderer vs Mitsuba's own projector emitter, same (unjittered) sample positions: mean

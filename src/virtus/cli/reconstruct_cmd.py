@@ -23,8 +23,8 @@ def register(app: typer.Typer) -> None:
         calibration: Annotated[
             Path | None,
             typer.Option(
-                help="Calibration file (rig-schema JSON, e.g. calibration.json, or OpenCV "
-                "YAML); default: the rig in DIR/capture.json."
+                help="Calibration file (rig-schema JSON, e.g. calibration.json; OpenCV YAML; "
+                "or a paper_txt/ folder); default: the rig in DIR/capture.json."
             ),
         ] = None,
         out: Annotated[

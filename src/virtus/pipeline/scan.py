@@ -155,24 +155,38 @@ def reconstruct(
     return Reconstruction(points, edges, rig)
 
 
-def load_rig_file(path: str | Path) -> Rig:
+def load_rig_file(path: str | Path, like: Rig | None = None) -> Rig:
     """Read a rig from a calibration file.
 
-    ``.json``: the rig schema of DESIGN.md section 3 (``calibration.json`` of ``virtus
-    calibrate``, ``capture.json``, ``virtus rig info --json``; extra keys are ignored; a
-    ``rig`` key holding the schema is accepted too). ``.yaml`` / ``.yml``: the OpenCV YAML
-    that ``virtus calibrate`` writes.
+    * ``.json``: the rig schema of DESIGN.md section 3 (``calibration.json`` of ``virtus
+      calibrate``, ``capture.json``, ``virtus rig info --json``); extra keys are ignored, and a
+      ``rig`` key holding the schema is accepted too.
+    * ``.yaml`` / ``.yml``: the OpenCV YAML that ``virtus calibrate`` writes.
+    * a directory: the paper code's text files (``paper_txt/`` of ``virtus calibrate``), which
+      carry no image sizes: they are taken from ``like`` (e.g. the capture's rig), else the
+      paper's (camera 960 x 960, projector 912 x 1140).
     """
     source = Path(path)
+    if source.is_dir():
+        from virtus.calib.io import load_paper_txt
+
+        if like is None:
+            return load_paper_txt(source)
+        cam, proj = like.camera.intrinsics, like.projector.intrinsics
+        return load_paper_txt(source, (cam.width, cam.height), (proj.width, proj.height))
     if not source.is_file():
-        raise InputError("calibration", "an existing calibration file", str(source))
+        raise InputError("calibration", "an existing calibration file or directory", str(source))
     suffix = source.suffix.lower()
     if suffix in (".yaml", ".yml"):
         from virtus.calib.io import load_opencv_yaml
 
         return load_opencv_yaml(source)
     if suffix != ".json":
-        raise InputError("calibration", "a .json (rig schema) or OpenCV .yaml file", str(source))
+        raise InputError(
+            "calibration",
+            "a .json (rig schema) or OpenCV .yaml file, or a paper_txt/ folder",
+            str(source),
+        )
     try:
         data = json.loads(source.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as error:
@@ -240,14 +254,13 @@ def reconstruct_capture(
     if decoded is None:
         result = decode_capture(capture_dir)
         decoded = (result.proj_uv, result.mask)
-    if calibration is None:
-        from virtus.capture import load_capture
-
-        rig = load_capture(capture_dir, load_gt=False).rig
-    elif isinstance(calibration, Rig):
+    if isinstance(calibration, Rig):
         rig = calibration
     else:
-        rig = load_rig_file(calibration)
+        from virtus.capture import load_capture
+
+        capture_rig = load_capture(capture_dir, load_gt=False).rig
+        rig = capture_rig if calibration is None else load_rig_file(calibration, capture_rig)
     proj_uv, mask = decoded
     cam = rig.camera.intrinsics
     if proj_uv.shape[:2] != (cam.height, cam.width):
