@@ -36,8 +36,9 @@ TRIANGULATION_M = 1e-6
 #: triangulation error.
 PIPELINE_TRUE_RIG_M = 5e-5
 #: the same capture reconstructed from the rig stored as OpenCV YAML or the paper's text files
-#: instead of JSON: those formats keep fewer digits (~1e-9 relative), i.e. nanometres.
-PIPELINE_FORMAT_M = 1e-6
+#: instead of JSON: both round-trip the parameters to ~1e-16 (measured), so the points agree
+#: to float rounding; 1 nm would catch a lost digit or a mm/m slip.
+PIPELINE_FORMAT_M = 1e-9
 
 # --- render -----------------------------------------------------------------------------
 #: renderer vs Mitsuba's own projector emitter, same (unjittered) sample positions: mean
