@@ -81,4 +81,8 @@ def resolve_scene(spec: str | Path, directory: str | Path) -> Any:
     text = str(spec)
     if text in BUILTIN_SCENES and not Path(text).is_file():
         return builtin_scene(text, directory)
+    if not Path(text).is_file():
+        raise InputError(
+            "scene", f"an existing scene YAML file or one of {', '.join(BUILTIN_SCENES)}", text
+        )
     return load_scene(text)
