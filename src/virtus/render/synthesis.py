@@ -162,13 +162,19 @@ def synthesize(
     out = np.empty((n_frames, n_pixels), dtype=dtype)
     groups = frame_groups(sequence)
     lengths = {"v": trace.projector_width, "h": trace.projector_height}
-    for direction, coordinate in (("v", trace.u_p), ("h", trace.v_p)):
-        rows = groups[direction]
-        if not rows:
-            continue
-        matrix = lookup_matrix(coordinate, trace.weight, lengths[direction], lookup)
-        profiles = _profiles(sequence, rows, lengths[direction])
-        _fill_direction(out, rows, matrix, profiles, ambient, transform)
+    coordinates = {"v": trace.u_p, "h": trace.v_p}
+    directions = [d for d in ("v", "h") if groups[d]]
+    profiles = {d: _profiles(sequence, groups[d], lengths[d]) for d in directions}
+    # Both directions' matrices are built at once (numpy releases the GIL).
+    with ThreadPoolExecutor(max_workers=min(2, _threads())) as pool:
+        matrices = dict(zip(directions, pool.map(
+            lambda d: lookup_matrix(coordinates[d], trace.weight, lengths[d], lookup),
+            directions,
+        ), strict=True))  # fmt: skip
+    for direction in directions:
+        _fill_direction(
+            out, groups[direction], matrices[direction], profiles[direction], ambient, transform
+        )
     if groups[None]:
         white = trace.direct
         for index in groups[None]:

@@ -126,18 +126,6 @@ def _inside(u: np.ndarray, v: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
         )
 
 
-def _apply(pose: Pose, points: np.ndarray) -> np.ndarray:
-    """``pose.apply`` written per component: numpy's (N, 3) @ (3, 3) is slow for large N."""
-    R, t = pose.R, pose.t  # noqa: N806
-    return np.stack(
-        [
-            points[:, 0] * R[i, 0] + points[:, 1] * R[i, 1] + points[:, 2] * R[i, 2] + t[i]
-            for i in range(3)
-        ],
-        axis=1,
-    )
-
-
 class _Tracer:
     """Dr.Jit side of one pass: Mitsuba scene, camera and projector poses in its world."""
 
@@ -154,25 +142,37 @@ class _Tracer:
         ray = mi.Ray3f(mi.Point3f(0.0, 0.0, 0.0), d)
         return self.cam2world @ ray
 
-    def centre(self, directions: np.ndarray) -> dict[str, np.ndarray]:
-        """Pixel-centre rays (3, N) float32, camera frame -> distance, hit, shadow, normal."""
-        dr = self.dr
-        si = self.mscene.ray_intersect(self._rays(directions))
+    def centre(self, directions: np.ndarray, cam2proj: Pose) -> dict[str, np.ndarray]:
+        """Pixel-centre rays (3, N) float64, camera frame -> ground truth per ray: point
+        (camera frame, float64, NaN where missed), normal toward the camera, hit, shadow,
+        and the point's normalised projector coordinates ``(x/z, y/z)`` (float64, NaN where
+        missed or behind the projector).
+
+        Points are ``t * d`` in float64 with Mitsuba's (float32) distance ``t``."""
+        mi, dr = self.mi, self.dr
+        si = self.mscene.ray_intersect(self._rays(directions.astype(np.float32)))
         hit = si.is_valid()
         occluded = self.mscene.ray_test(si.spawn_ray_to(self.projector), hit)
+        d = [mi.Float64(directions[i]) for i in range(3)]
+        t = dr.select(hit, mi.Float64(si.t), dr.nan)
+        point = [t * d[i] for i in range(3)]
+        # Shading normal, world -> camera frame, turned toward the camera (two-sided).
         n = si.sh_frame.n
         R = self.world2cam_R  # noqa: N806
-        normal = [
-            float(R[i, 0]) * n.x + float(R[i, 1]) * n.y + float(R[i, 2]) * n.z for i in range(3)
-        ]
+        normal = [float(R[i, 0]) * n.x + float(R[i, 1]) * n.y + float(R[i, 2]) * n.z
+                  for i in range(3)]  # fmt: skip
+        facing = normal[0] * d[0] + normal[1] * d[1] + normal[2] * d[2] > 0
+        normal = [dr.select(hit, dr.select(facing, -c, c), dr.nan) for c in normal]
+        Rp, tp = cam2proj.R, cam2proj.t  # noqa: N806
+        x = [float(Rp[i, 0]) * point[0] + float(Rp[i, 1]) * point[1]
+             + float(Rp[i, 2]) * point[2] + float(tp[i]) for i in range(3)]  # fmt: skip
+        inv_z = dr.select(x[2] > 0, dr.rcp(x[2]), dr.nan)
         out = {
-            "t": dr.select(hit, si.t, 0.0),
-            "hit": hit,
-            "occluded": occluded & hit,
-            "nx": normal[0],
-            "ny": normal[1],
-            "nz": normal[2],
-        }
+            "px": point[0], "py": point[1], "pz": point[2],
+            "nx": normal[0], "ny": normal[1], "nz": normal[2],
+            "xn": x[0] * inv_z, "yn": x[1] * inv_z,
+            "hit": hit, "occluded": occluded & hit,
+        }  # fmt: skip
         dr.eval(*out.values())
         return {key: value.numpy() for key, value in out.items()}
 
@@ -259,20 +259,23 @@ def trace(
     tracer = _Tracer(mi, dr, mscene, cam2world, cam2world @ rig.proj2cam)
 
     # ---- ground truth through the pixel centres (float64 directions) ----
-    centre_f32 = np.ascontiguousarray(centre_dirs.T, dtype=np.float32)
+    centre_t = np.ascontiguousarray(centre_dirs.T)
     parts = [
-        tracer.centre(centre_f32[:, i : i + _RAYS_PER_CHUNK])
+        tracer.centre(centre_t[:, i : i + _RAYS_PER_CHUNK], rig.cam2proj)
         for i in range(0, n_pixels, _RAYS_PER_CHUNK)
     ]
     c = {key: np.concatenate([part[key] for part in parts]) for key in parts[0]}
     hit = c["hit"]
-    points = centre_dirs * np.where(hit, c["t"], np.nan)[:, None]
+    points = np.stack([c["px"], c["py"], c["pz"]], axis=1)
     normals = np.stack([c["nx"], c["ny"], c["nz"]], axis=1).astype(np.float64)
-    # Turn normals toward the camera (two-sided surfaces).
-    flip = np.sum(normals * centre_dirs, axis=1) > 0
-    normals[flip] *= -1.0
-    normals[~hit] = np.nan
-    proj_uv = projector.project(_apply(rig.cam2proj, points))
+    xy = np.stack([c["xn"], c["yn"]], axis=1)
+    if projector.has_distortion:
+        finite = np.isfinite(xy[:, 0])
+        xy[finite] = projector.distort_normalized(xy[finite])
+    # The projector model (as Intrinsics.project), on the points' normalised coordinates.
+    proj_uv = np.stack(
+        [projector.fx * xy[:, 0] + projector.cx, projector.fy * xy[:, 1] + projector.cy], axis=1
+    )
     outside = hit & ~_inside(proj_uv[:, 0], proj_uv[:, 1], projector)
     gt = GroundTruth(
         depth=points[:, 2].reshape(height, width),
