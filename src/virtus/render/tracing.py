@@ -166,11 +166,14 @@ class _Tracer:
         Rp, tp = cam2proj.R, cam2proj.t  # noqa: N806
         x = [float(Rp[i, 0]) * point[0] + float(Rp[i, 1]) * point[1]
              + float(Rp[i, 2]) * point[2] + float(tp[i]) for i in range(3)]  # fmt: skip
-        inv_z = dr.select(x[2] > 0, dr.rcp(x[2]), dr.nan)
+        # A true division: dr.rcp may be an approximation on GPUs (rcp.approx.f64).
+        in_front = x[2] > 0
+        xn = dr.select(in_front, x[0] / x[2], dr.nan)
+        yn = dr.select(in_front, x[1] / x[2], dr.nan)
         out = {
             "px": point[0], "py": point[1], "pz": point[2],
             "nx": normal[0], "ny": normal[1], "nz": normal[2],
-            "xn": x[0] * inv_z, "yn": x[1] * inv_z,
+            "xn": xn, "yn": yn,
             "hit": hit, "occluded": occluded & hit,
         }  # fmt: skip
         dr.eval(*out.values())
