@@ -17,7 +17,12 @@ def register(app: typer.Typer) -> None:
         reconstruct it with the calibrated parameters, fit a sphere, and compare with the
         paper. Writes OUT/metrics.json, OUT/calibration.json, OUT/scan/ (capture + points.ply)."""
         from rich.console import Console
-        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+        from rich.progress import (
+            BarColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+        )
 
         from virtus.pipeline.demo import run_demo
 
@@ -25,7 +30,6 @@ def register(app: typer.Typer) -> None:
         with Progress(
             TextColumn("[bold]{task.description}"),
             BarColumn(),
-            TextColumn("{task.completed}/{task.total}"),
             TimeElapsedColumn(),
             console=console,
         ) as bar:
@@ -35,8 +39,9 @@ def register(app: typer.Typer) -> None:
                 if done is None:
                     bar.update(task, description=step)
                 else:
-                    bar.update(task, description=f"{step} (board poses)", completed=done,
-                               total=total)  # fmt: skip
+                    # the count lives in the description so later steps do not inherit it
+                    bar.update(task, description=f"{step} ({done}/{total} board poses)",
+                               completed=done, total=total)  # fmt: skip
 
             result = run_demo(out, progress=progress)
         _print_table(console, result.metrics)
