@@ -188,6 +188,7 @@ def calibrate_rig(
     board: str | CircleBoard = "7x13",
     poses: str | list[BoardPose] = "paper",
     spp: int = 4,
+    lookup: str = "nearest",
     rng: np.random.Generator | int | None = None,
     progress: Progress | None = None,
     out_dir: str | Path | None = None,
@@ -202,6 +203,8 @@ def calibrate_rig(
     board : a :class:`CircleBoard` or ``"ROWSxCOLS"`` (paper: 4x7, 5x9, 7x13).
     poses : ``"paper"``, ``"random:N"`` or a list of :class:`BoardPose`.
     spp : renderer supersamples per pixel (a perfect square).
+    lookup : the renderer's projector pattern lookup, ``"nearest"`` (sharp DMD pixels) or
+        ``"bilinear"``; use the same as for the scans the calibration serves.
     rng : seeds the random poses.
     progress : called after each pose as ``progress(done, total, name)``.
     out_dir : if given, per-pose observations go to ``out_dir/poses/`` as they finish and
@@ -221,8 +224,11 @@ def calibrate_rig(
     """
     from virtus.patterns import default_sequence
     from virtus.render import render
+    from virtus.render.synthesis import LOOKUPS
 
     spp = positive_int("spp", spp)
+    if lookup not in LOOKUPS:  # checked before any pose is rendered
+        raise InputError("lookup", f"one of {LOOKUPS}", lookup)
     board = board_from_spec(board)
     seed = rng if isinstance(rng, int) else None
     gen = as_rng(rng)
@@ -242,6 +248,7 @@ def calibrate_rig(
         "n_poses": len(pose_list),
         "frames_per_pose": len(sequence),
         "spp": spp,
+        "lookup": lookup,
         "seed": seed,
         "fix_intrinsics": fix_intrinsics,
         "board_blur_m": BOARD_BLUR_M,
@@ -265,7 +272,9 @@ def calibrate_rig(
     observations = []
     for index, pose in enumerate(pose_list):
         start = time.perf_counter()
-        rendering = render(true_rig, board_scene(board, pose, texture), sequence, spp=spp)
+        rendering = render(
+            true_rig, board_scene(board, pose, texture), sequence, spp=spp, lookup=lookup
+        )
         middle = time.perf_counter()
         obs = observe_pose(rendering.frames, sequence, board, pose.name)
         timing["render_s"] += middle - start

@@ -7,6 +7,8 @@ from typing import Annotated, Any
 
 import typer
 
+from virtus.cli.options import LOOKUP_HELP, Lookup
+
 DEFAULT_OUT = Path("virtus-calibration")
 
 
@@ -22,6 +24,7 @@ def register(app: typer.Typer) -> None:
         ),
         poses: Annotated[str, typer.Option(help="'paper' (18 poses) or 'random:N'.")] = "paper",
         spp: Annotated[int, typer.Option(help="Supersamples per pixel (perfect square).")] = 4,
+        lookup: Annotated[Lookup, typer.Option(help=LOOKUP_HELP)] = Lookup.nearest,
         seed: Annotated[int, typer.Option(help="Seed of the random poses.")] = 0,
     ) -> None:
         """Render the board in every pose (52 frames each), calibrate camera, projector and
@@ -56,6 +59,7 @@ def register(app: typer.Typer) -> None:
                     board=board,
                     poses=poses,
                     spp=spp,
+                    lookup=lookup.value,
                     rng=seed,
                     progress=progress,
                     out_dir=out,

@@ -3,16 +3,12 @@
 from __future__ import annotations
 
 import time
-from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-
-class Lookup(StrEnum):
-    nearest = "nearest"
-    bilinear = "bilinear"
+from virtus.cli.options import LOOKUP_HELP, Lookup
 
 
 def register(app: typer.Typer) -> None:
@@ -27,9 +23,7 @@ def register(app: typer.Typer) -> None:
             int, typer.Option(help="Supersamples per pixel (a square: 1, 4, 9...).")
         ] = 4,
         bit_depth: Annotated[int, typer.Option(help="Frame bit depth: 8 or 16.")] = 8,
-        lookup: Annotated[
-            Lookup, typer.Option(help="Pattern lookup: nearest (DMD pixels) or bilinear.")
-        ] = Lookup.nearest,
+        lookup: Annotated[Lookup, typer.Option(help=LOOKUP_HELP)] = Lookup.nearest,
         rig: Annotated[
             Path | None, typer.Option(help="Rig or calibration JSON; default: the paper's rig.")
         ] = None,

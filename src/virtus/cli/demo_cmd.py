@@ -7,11 +7,14 @@ from typing import Annotated, Any
 
 import typer
 
+from virtus.cli.options import LOOKUP_HELP, Lookup
+
 
 def register(app: typer.Typer) -> None:
     @app.command("demo")
     def demo(
         out: Annotated[Path, typer.Option(help="Output directory.")] = Path("virtus-demo"),
+        lookup: Annotated[Lookup, typer.Option(help=LOOKUP_HELP)] = Lookup.nearest,
     ) -> None:
         """Calibrate the paper's rig with its 18 board poses, capture the 100 mm sphere,
         reconstruct it with the calibrated parameters, fit a sphere, and compare with the
@@ -24,7 +27,8 @@ def register(app: typer.Typer) -> None:
             TimeElapsedColumn,
         )
 
-        from virtus.pipeline.demo import run_demo
+        from virtus.pipeline.demo import DemoConfig, run_demo
+        from virtus.pipeline.scan import ScanSettings
 
         console = Console()
         with Progress(
@@ -43,7 +47,8 @@ def register(app: typer.Typer) -> None:
                     bar.update(task, description=f"{step} ({done}/{total} board poses)",
                                completed=done, total=total)  # fmt: skip
 
-            result = run_demo(out, progress=progress)
+            config = DemoConfig(scan=ScanSettings(lookup=lookup.value))
+            result = run_demo(out, config, progress=progress)
         _print_table(console, result.metrics)
         console.print(f"wrote {out / 'metrics.json'}, {out / 'calibration.json'}, "
                       f"{out / 'scan' / 'points.ply'}")  # fmt: skip

@@ -2,16 +2,12 @@
 
 from __future__ import annotations
 
-from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-
-class Lookup(StrEnum):
-    nearest = "nearest"
-    bilinear = "bilinear"
+from virtus.cli.options import LOOKUP_HELP, Lookup
 
 
 def register(app: typer.Typer) -> None:
@@ -35,7 +31,7 @@ def register(app: typer.Typer) -> None:
         spp: Annotated[int, typer.Option(help="Supersamples per pixel (1, 4, 9, ...).")] = 4,
         lookup: Annotated[
             Lookup,
-            typer.Option(help="Pattern lookup: nearest (sharp DMD pixels) or bilinear (blurred)."),
+            typer.Option(help=LOOKUP_HELP),
         ] = Lookup.nearest,
         turntable: Annotated[
             int,

@@ -54,8 +54,8 @@ class DemoConfig:
     calibration_spp: int = 4
     """Renderer supersamples per pixel for the calibration captures."""
     scan: ScanSettings = field(default_factory=ScanSettings)
-    """Capture and reconstruction of the sphere. The pattern lookup is the calibration
-    renderer's (``nearest``: sharp DMD pixels), so both captures share one sensor model."""
+    """Capture and reconstruction of the sphere. Its pattern lookup (default ``nearest``:
+    sharp DMD pixels) is also used for the calibration captures: one sensor model."""
     sphere_threshold_m: float = 1e-3
     """MSAC inlier threshold of the sphere fit (m). About 3x the point noise of sharp DMD
     pixels (fit RMS ~0.3 mm): farther points are gross errors (mixed or mis-decoded pixels)."""
@@ -157,6 +157,7 @@ def run_demo(
         board=config.board,
         poses=config.poses,
         spp=config.calibration_spp,
+        lookup=config.scan.lookup,
         rng=config.seed,
         progress=lambda done, total, name: say("calibration", done, total),
         out_dir=root,
