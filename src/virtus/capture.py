@@ -32,6 +32,7 @@ import numpy as np
 
 from virtus import __version__
 from virtus.errors import InputError, VirtusError
+from virtus.jsonio import write_json
 from virtus.optics import Rig
 
 #: Format tag of ``capture.json``.
@@ -221,8 +222,7 @@ def save_capture(
     }
     if extra:
         data["extra"] = extra
-    manifest.write_text(json.dumps(data, indent=1, default=_json_default) + "\n")
-    return manifest
+    return write_json(manifest, data, indent=1)
 
 
 def load_capture(directory: str | Path, *, load_gt: bool = True) -> Capture:
@@ -285,13 +285,3 @@ def _relative_to(data: Any, base: Path) -> Any:
 def _relative_path(text: str, base: Path) -> str:
     path = Path(text).resolve()
     return str(path.relative_to(base)) if path.is_relative_to(base) else str(path)
-
-
-def _json_default(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")

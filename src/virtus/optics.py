@@ -27,6 +27,7 @@ from scipy.spatial.transform import Rotation
 
 from virtus.checks import as_float_array, as_points, finite, positive, positive_int
 from virtus.errors import InputError
+from virtus.jsonio import write_json
 
 #: Allowed numbers of distortion coefficients (OpenCV: 4, 5 or 8; 0 = none).
 _DIST_LENGTHS = (0, 4, 5, 8)
@@ -583,9 +584,7 @@ class Rig:
 
     def save_json(self, path: str | Path) -> Path:
         """Write the rig schema to ``path`` (JSON, metres); returns the path."""
-        path = Path(path)
-        path.write_text(json.dumps(self.to_dict(), indent=2) + "\n")
-        return path
+        return write_json(path, self.to_dict())
 
     @classmethod
     def load_json(cls, path: str | Path) -> Rig:

@@ -45,7 +45,6 @@ the black frame come last. The paper's default, 52 frames::
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -57,6 +56,7 @@ import numpy as np
 from virtus import phase as _phase
 from virtus.checks import positive, positive_int
 from virtus.errors import InputError, VirtusError
+from virtus.jsonio import write_json
 
 __all__ = [
     "DEFAULT_HETERODYNE_PERIODS",
@@ -493,9 +493,7 @@ class PatternSequence:
             if not cv2.imwrite(str(folder / name), pixels):
                 raise VirtusError(f"could not write {folder / name}")
             entry["file"] = name
-        path = folder / "sequence.json"
-        path.write_text(json.dumps(data, indent=2) + "\n")
-        return path
+        return write_json(folder / "sequence.json", data)
 
     # --- decoding -----------------------------------------------------------------------
 

@@ -18,7 +18,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +25,7 @@ import cv2
 import numpy as np
 
 from virtus.errors import InputError
+from virtus.jsonio import write_json
 from virtus.optics import Camera, Intrinsics, Pose, Projector, Rig
 
 #: File names of the paper code's calibration text files.
@@ -45,8 +45,7 @@ def save_json(data: dict[str, Any], path: str | Path) -> Path:
     """Write a calibration dict (rig schema + extras) as indented JSON; returns the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(data, indent=2) + "\n")
-    return path
+    return write_json(path, data)
 
 
 # -- OpenCV FileStorage ---------------------------------------------------------------------

@@ -10,7 +10,6 @@ extrinsics), the distances measure the shape.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -19,6 +18,7 @@ import numpy as np
 
 from virtus.checks import as_points, positive
 from virtus.errors import VirtusError
+from virtus.jsonio import write_json
 from virtus.metrology import C2MResult, cloud_to_mesh
 from virtus.optics import Pose
 from virtus.pipeline import layout
@@ -152,5 +152,5 @@ def evaluate_scan(
     results = evaluate_points(cloud.points, meshes, register=register)
     if save:
         report = {"units": "mm", "cloud": str(source), "meshes": [r.to_dict() for r in results]}
-        (directory / layout.EVALUATION_JSON).write_text(json.dumps(report, indent=2) + "\n")
+        write_json(directory / layout.EVALUATION_JSON, report)
     return results

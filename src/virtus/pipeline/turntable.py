@@ -15,7 +15,6 @@ are concatenated into one cloud. The merged cloud is then compared with the mesh
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,6 +24,7 @@ import numpy as np
 
 from virtus.checks import positive_int
 from virtus.errors import VirtusError
+from virtus.jsonio import write_json
 from virtus.metrology import C2MResult, MeshIndex, cloud_to_mesh, icp_to_mesh
 from virtus.optics import Pose, Rig
 from virtus.pipeline.scan import ScanSettings, scan
@@ -185,5 +185,5 @@ def turntable_scan(
     report["settings"] = settings.to_dict()
     report["refine"] = refine
     report["mesh"] = str(mesh_path)
-    (root / "turntable.json").write_text(json.dumps(report, indent=2) + "\n")
+    write_json(root / "turntable.json", report)
     return result
