@@ -115,3 +115,17 @@ def test_cli_capture_missing_scene_file(tmp_path, capsys) -> None:
     code, _, stderr = run_cli(["capture", "--scene", str(tmp_path / "none.yaml")], capsys)
     assert code == 2 and "expected an existing YAML file" in stderr
     assert len(stderr.strip().splitlines()) == 1
+
+
+def test_capture_module_does_not_load_mitsuba():
+    # DESIGN rule: only virtus.render knows Mitsuba exists, and only when it renders.
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, virtus.capture; "
+        "print(sorted({m.split('.')[0] for m in sys.modules} & {'mitsuba', 'drjit'}))"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "[]"

@@ -34,20 +34,14 @@ from virtus import __version__
 from virtus.errors import InputError, VirtusError
 from virtus.jsonio import write_json
 from virtus.optics import Rig
+from virtus.render.groundtruth import ARRAY_NAMES
 
 #: Format tag of ``capture.json``.
 CAPTURE_FORMAT = "virtus.capture/1"
-#: Ground-truth arrays written to ``gt/`` (``mask`` = hit & lit & inside).
-GT_NAMES = (
-    "depth",
-    "points",
-    "normals",
-    "proj_uv",
-    "mask",
-    "mask_hit",
-    "mask_shadow",
-    "mask_outside",
-)
+#: Ground-truth arrays written to ``gt/`` (``mask`` = hit & lit & inside): the names of
+#: :meth:`virtus.render.GroundTruth.arrays` (importing virtus.render loads neither Mitsuba
+#: nor Dr.Jit: render.backend imports them when a variant is chosen).
+GT_NAMES = ARRAY_NAMES
 #: Units recorded in ``capture.json``.
 UNITS = {
     "length": "m",
