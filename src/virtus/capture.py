@@ -195,8 +195,7 @@ def save_capture(
         np.save(gt_dir / f"{name}.npy", arrays[name])
     scene_data = None
     if scene is not None:
-        scene_data = scene.to_dict(asset_dir=directory / "scene_assets")
-        scene_data = _relative_to(scene_data, directory.resolve())
+        scene_data = scene.to_dict(asset_dir=directory / "scene_assets", relative_to=directory)
     data = {
         "format": CAPTURE_FORMAT,
         "virtus_version": __version__,
@@ -258,24 +257,3 @@ def load_capture(directory: str | Path, *, load_gt: bool = True) -> Capture:
         key: value for key, value in data.items() if key not in ("rig", "sequence", "scene")
     }
     return Capture(frames, rig, sequence, scene, gt, metadata, directory)
-
-
-def _relative_to(data: Any, base: Path) -> Any:
-    """Make file paths under ``base`` relative (the directory can be moved)."""
-    if isinstance(data, dict):
-        return {
-            key: (
-                _relative_path(value, base)
-                if key in ("path", "texture", "albedo") and isinstance(value, str)
-                else _relative_to(value, base)
-            )
-            for key, value in data.items()
-        }
-    if isinstance(data, list | tuple):
-        return [_relative_to(item, base) for item in data]
-    return data
-
-
-def _relative_path(text: str, base: Path) -> str:
-    path = Path(text).resolve()
-    return str(path.relative_to(base)) if path.is_relative_to(base) else str(path)

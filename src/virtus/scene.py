@@ -55,6 +55,15 @@ from virtus.optics import Pose
 MESH_SUFFIXES = (".stl", ".obj", ".ply")
 #: Image suffixes accepted as textures (read with OpenCV) besides ``.npy`` float arrays.
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".exr")
+#: Scene keys that hold file paths (resolved against, or made relative to, a folder).
+_PATH_KEYS = ("path", "texture", "albedo")
+#: (8, 3) float64: the corners of the cube [-1, 1]^3.
+_CORNER_SIGNS = np.array(np.meshgrid(*([[-1.0, 1.0]] * 3), indexing="ij")).reshape(3, -1).T
+#: Raised when in-memory textures would have to be written without an asset folder.
+_NO_ASSET_DIR = (
+    "an in-memory texture cannot be written to a scene file without an asset folder; "
+    "use Scene.to_yaml(path) or Scene.to_dict(asset_dir=...)"
+)
 
 __all__ = [
     "BoxObject",
@@ -281,10 +290,7 @@ def _dump_image_or_path(value: Any) -> Any:
     if isinstance(value, Path):
         return str(value)
     if not _ASSET_WRITER:
-        raise VirtusError(
-            "an in-memory texture cannot be written to a scene file without an asset folder; "
-            "use Scene.to_yaml(path) or Scene.to_dict(asset_dir=...)"
-        )
+        raise VirtusError(_NO_ASSET_DIR)
     return _ASSET_WRITER[-1](value)
 
 
@@ -307,8 +313,23 @@ class _Posed(_Model):
         return value.to_dict()
 
     def _corners_world(self, half: np.ndarray) -> np.ndarray:
-        signs = np.array(np.meshgrid(*([[-1.0, 1.0]] * 3), indexing="ij")).reshape(3, -1).T
-        return self.pose.apply(signs * half)
+        """(8, 3) world-frame corners of the local box [-half, half], metres."""
+        return self.pose.apply(_CORNER_SIGNS * half)
+
+
+class _Rectangle(_Posed):
+    """Base of the flat objects: ``size_m = (width, height)`` in the local z = 0 plane,
+    centred at the local origin (subclasses declare the field, so dumps keep their order)."""
+
+    @field_validator("size_m", mode="before", check_fields=False)
+    @classmethod
+    def _check_size(cls, value: Any) -> tuple:
+        return _as_vector("size_m", value, 2, positive_entries=True)
+
+    def bounds_world(self) -> np.ndarray:
+        """(8, 3) float64 world-frame corners (the 4 corners, twice), metres."""
+        width, height = self.size_m  # type: ignore[attr-defined]
+        return self._corners_world(np.array([width / 2, height / 2, 0.0]))
 
 
 class SphereObject(_Model):
@@ -329,11 +350,10 @@ class SphereObject(_Model):
 
     def bounds_world(self) -> np.ndarray:
         """(8, 3) float64 corners of a world-frame box enclosing the object, metres."""
-        signs = np.array(np.meshgrid(*([[-1.0, 1.0]] * 3), indexing="ij")).reshape(3, -1).T
-        return np.asarray(self.center_m) + self.radius_m * signs
+        return np.asarray(self.center_m) + self.radius_m * _CORNER_SIGNS
 
 
-class PlaneObject(_Posed):
+class PlaneObject(_Rectangle):
     """A rectangle ``size_m = (width, height)`` in its local z = 0 plane, centred at the
     local origin (width along local x); reflects on both sides."""
 
@@ -342,15 +362,6 @@ class PlaneObject(_Posed):
     size_m: tuple[float, float]
     """(width along local x, height along local y) in metres."""
     material: Material = Field(default_factory=Material)
-
-    @field_validator("size_m", mode="before")
-    @classmethod
-    def _check_size(cls, value: Any) -> tuple:
-        return _as_vector("size_m", value, 2, positive_entries=True)
-
-    def bounds_world(self) -> np.ndarray:
-        """(8, 3) float64 world-frame corners (the 4 corners, twice), metres."""
-        return self._corners_world(np.array([self.size_m[0] / 2, self.size_m[1] / 2, 0.0]))
 
 
 class BoxObject(_Posed):
@@ -430,11 +441,10 @@ class MeshObject(_Posed):
         """(8, 3) float64 corners of the world-frame bounding box of the vertices, metres."""
         vertices = self.load()[0]
         low, high = vertices.min(axis=0), vertices.max(axis=0)
-        signs = np.array(np.meshgrid(*([[0.0, 1.0]] * 3), indexing="ij")).reshape(3, -1).T
-        return low + signs * (high - low)
+        return low + (_CORNER_SIGNS + 1.0) / 2.0 * (high - low)
 
 
-class TexturedPlaneObject(_Posed):
+class TexturedPlaneObject(_Rectangle):
     """A flat board with an albedo texture (e.g. a calibration target).
 
     The plane is the local z = 0 plane, ``size_m = (width, height)`` centred at the local
@@ -452,11 +462,6 @@ class TexturedPlaneObject(_Posed):
     texture: Path | np.ndarray
     """Albedo texture: an image/.npy file or an in-memory (H, W) float array in [0, 1]."""
     material: Material = Field(default_factory=lambda: Material(albedo=1.0))
-
-    @field_validator("size_m", mode="before")
-    @classmethod
-    def _check_size(cls, value: Any) -> tuple:
-        return _as_vector("size_m", value, 2, positive_entries=True)
 
     @field_validator("texture", mode="before")
     @classmethod
@@ -480,10 +485,6 @@ class TexturedPlaneObject(_Posed):
         """(H, W) float64 albedo in [0, 1]: the texture times the material's albedo."""
         image = load_texture(self.texture) if isinstance(self.texture, Path) else self.texture
         return image * float(self.material.albedo)  # type: ignore[arg-type]
-
-    def bounds_world(self) -> np.ndarray:
-        """(8, 3) float64 world-frame corners (the 4 corners, twice), metres."""
-        return self._corners_world(np.array([self.size_m[0] / 2, self.size_m[1] / 2, 0.0]))
 
 
 #: Location parts pydantic adds for unions and nested models (not keys of the YAML).
@@ -539,10 +540,13 @@ class Scene(_Model):
 
     # -- I/O -------------------------------------------------------------------------------
 
-    def to_dict(self, asset_dir: str | Path | None = None) -> dict[str, Any]:
+    def to_dict(
+        self, asset_dir: str | Path | None = None, relative_to: str | Path | None = None
+    ) -> dict[str, Any]:
         """JSON/YAML-ready dict. In-memory texture arrays are written as ``.npy`` files into
         ``asset_dir`` (named ``texture_<k>.npy``) and referenced by their paths; without an
-        ``asset_dir`` such arrays raise :class:`VirtusError`."""
+        ``asset_dir`` such arrays raise :class:`VirtusError`. With ``relative_to``, file
+        paths inside that folder are written relative to it (the folder can be moved)."""
         counter = [0]
 
         def write(array: np.ndarray) -> str:
@@ -554,17 +558,15 @@ class Scene(_Model):
             return str(path)
 
         if asset_dir is None and self._has_arrays():
-            raise VirtusError(
-                "an in-memory texture cannot be written to a scene file without an asset "
-                "folder; use Scene.to_yaml(path) or Scene.to_dict(asset_dir=...)"
-            )
+            raise VirtusError(_NO_ASSET_DIR)
         if asset_dir is not None:
             _ASSET_WRITER.append(write)
         try:
-            return self.model_dump(mode="python")
+            data = self.model_dump(mode="python")
         finally:
             if asset_dir is not None:
                 _ASSET_WRITER.pop()
+        return data if relative_to is None else _relative_paths(data, Path(relative_to))
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], base_dir: str | Path | None = None) -> Scene:
@@ -581,14 +583,9 @@ class Scene(_Model):
         referenced by paths relative to the YAML file."""
         path = Path(path)
         assets = path.parent / f"{path.stem}_assets"
-        data = self.to_dict(asset_dir=assets)
-        data = _relative_paths(data, path.parent.resolve())
+        data = self.to_dict(asset_dir=assets, relative_to=path.parent)
         path.write_text(yaml.safe_dump(data, sort_keys=False))
         return path
-
-
-def _path_keys() -> tuple[str, ...]:
-    return ("path", "texture", "albedo")
 
 
 def _map_paths(data: Any, function: Any) -> Any:
@@ -596,7 +593,7 @@ def _map_paths(data: Any, function: Any) -> Any:
         return {
             key: (
                 function(value)
-                if key in _path_keys() and isinstance(value, str)
+                if key in _PATH_KEYS and isinstance(value, str)
                 else _map_paths(value, function)
             )
             for key, value in data.items()
@@ -611,6 +608,8 @@ def _resolve_paths(data: Mapping[str, Any], base: Path) -> dict[str, Any]:
 
 
 def _relative_paths(data: Mapping[str, Any], base: Path) -> dict[str, Any]:
+    base = base.resolve()
+
     def relative(text: str) -> str:
         path = Path(text).resolve()
         return str(path.relative_to(base)) if path.is_relative_to(base) else str(path)
