@@ -2,8 +2,8 @@
 
 Each sub-command lives in its own module here and exposes ``register(app)``. Heavy imports
 (Mitsuba, OpenCV) happen inside the command functions so ``virtus --help`` stays fast.
-Errors caused by bad input (:class:`virtus.VirtusError`, ``OSError``) are printed as one line
-on stderr, with exit status 2 and no traceback.
+Usage errors and errors caused by bad input (:class:`virtus.VirtusError`, ``OSError``) are
+printed as one line on stderr, with exit status 2 and no traceback.
 """
 
 from __future__ import annotations
@@ -57,11 +57,24 @@ _register_commands()
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the console script; ``argv`` defaults to ``sys.argv[1:]``.
 
-    Typer handles usage errors itself (exit 2 with a usage line); errors raised by the
-    library for bad input or missing files become one line on stderr, exit status 2.
+    Every error ends as one line on stderr and a non-zero exit status, never a traceback:
+    usage errors found by Typer (unknown command or option, a value of the wrong type or
+    not among the choices; status 2), and errors raised by the library for bad input or
+    missing files (:class:`VirtusError`, ``OSError``; status 2).
     """
     try:
-        app(args=argv, prog_name="virtus")
+        status = app(args=argv, prog_name="virtus", standalone_mode=False)
+    except typer.TyperException as error:
+        # NoArgsIsHelpError: Typer has printed the help already.
+        if type(error).__name__ != "NoArgsIsHelpError":
+            format_message = getattr(error, "format_message", None)
+            message = format_message() if format_message else str(error)
+            message = " ".join(message.replace("Value error, ", "").split())
+            print(f"virtus: error: {message}", file=sys.stderr)
+        sys.exit(getattr(error, "exit_code", 2))
+    except typer.Abort:
+        print("virtus: aborted", file=sys.stderr)
+        sys.exit(1)
     except VirtusError as error:
         print(f"virtus: error: {error}", file=sys.stderr)
         sys.exit(2)
@@ -69,3 +82,6 @@ def main(argv: list[str] | None = None) -> None:
         where = f": {error.filename}" if error.filename else ""
         print(f"virtus: error: {error.strerror or error}{where}", file=sys.stderr)
         sys.exit(2)
+    # Without standalone mode Typer returns the status of --help or typer.Exit, or what the
+    # command returned (None); exit as standalone mode would.
+    sys.exit(status if isinstance(status, int) else 0)

@@ -1,0 +1,44 @@
+"""Every CLI error is one line on stderr and a non-zero exit status, never a traceback."""
+
+from __future__ import annotations
+
+import pytest
+
+from virtus.cli import main
+
+BAD_INVOCATIONS = [
+    # usage errors found by Typer
+    (["no-such-command"], "No such command"),
+    (["capture", "--no-such-option"], "No such option"),
+    (["capture", "--spp", "four"], "Invalid value for '--spp'"),
+    (["scan", "--lookup", "cubic"], "'cubic' is not one of"),
+    (["decode"], "Missing argument"),
+    # bad values found by the library before any rendering
+    (["capture", "--spp", "3"], "spp: expected a perfect square"),
+    (["capture", "--bit-depth", "12"], "bit_depth: expected 8 or 16"),
+    (["calibrate", "--board", "4x6"], "cols: expected an odd number of columns"),
+    (["calibrate", "--poses", "random:0"], "n: expected an integer >= 1"),
+    (["capture", "--scene", "missing.yaml"], "scene: expected an existing YAML file"),
+    (["rig", "info", "--rig", "missing.json"], "No such file or directory"),
+]
+
+
+@pytest.mark.parametrize(("argv", "message"), BAD_INVOCATIONS)
+def test_bad_invocation_is_one_line_on_stderr(argv, message, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    if "--out" not in argv and argv[0] in ("capture", "calibrate", "scan"):
+        argv = [*argv, "--out", str(tmp_path / "out")]
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("virtus: error: "), err
+    assert message in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_help_exits_with_status_zero(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["rig", "info", "--help"])
+    assert exit_info.value.code == 0
+    assert "--rig" in capsys.readouterr().out
