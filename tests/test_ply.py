@@ -59,6 +59,12 @@ def test_reads_ascii_and_big_endian_with_faces(tmp_path: Path) -> None:
 def test_empty_cloud_round_trips(tmp_path: Path) -> None:
     cloud = read_ply(write_ply(tmp_path / "e.ply", np.zeros((0, 3))))
     assert len(cloud) == 0
+    ascii_ply = tmp_path / "e_ascii.ply"
+    ascii_ply.write_text(
+        "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\n"
+        "property float z\nend_header\n"
+    )
+    assert read_ply(ascii_ply).points.shape == (0, 3)
 
 
 @pytest.mark.parametrize(

@@ -280,6 +280,8 @@ def _read_ascii_vertices(source, body, elements, vertex_index):
         table = np.array([r.split()[: len(props)] for r in rows], dtype=np.float64)
     except ValueError:
         raise PlyError(f"{source}: bad ascii vertex data") from None
+    if count == 0:  # np.array([]) has shape (0,), not (0, n_props)
+        table = table.reshape(0, len(props))
     if table.shape != (count, len(props)):
         raise PlyError(f"{source}: bad ascii vertex data")
     data = np.empty(count, dtype=record)
