@@ -498,37 +498,34 @@ class Pose:
 
 
 @dataclass(frozen=True)
-class Camera:
-    """A camera: pinhole + distortion intrinsics (its frame is OpenCV's)."""
+class _Device:
+    """A device described by its intrinsics (its frame is OpenCV's)."""
 
     intrinsics: Intrinsics
 
     @property
     def width(self) -> int:
+        """Image width, pixels."""
         return self.intrinsics.width
 
     @property
     def height(self) -> int:
+        """Image height, pixels."""
         return self.intrinsics.height
 
 
 @dataclass(frozen=True)
-class Projector:
+class Camera(_Device):
+    """A camera: pinhole + distortion intrinsics (its frame is OpenCV's)."""
+
+
+@dataclass(frozen=True)
+class Projector(_Device):
     """A projector, modelled as an inverse camera with the same intrinsics model.
 
     ``intrinsics.project`` maps a point in the projector frame to the projector pixel
     ``(u_p, v_p)`` that lights it.
     """
-
-    intrinsics: Intrinsics
-
-    @property
-    def width(self) -> int:
-        return self.intrinsics.width
-
-    @property
-    def height(self) -> int:
-        return self.intrinsics.height
 
 
 @dataclass(frozen=True)
