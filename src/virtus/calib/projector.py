@@ -118,11 +118,3 @@ def apply_homographies(homographies: np.ndarray, cam_points: np.ndarray) -> np.n
         raise InputError("cam_points", f"{len(hs)} points (one per homography)", len(points))
     p = np.einsum("nij,nj->ni", hs, np.column_stack([points, np.ones(len(points))]))
     return p[:, :2] / p[:, 2:3]
-
-
-def projector_points(proj_uv: np.ndarray, board: CircleBoard, cam_points: np.ndarray) -> np.ndarray:
-    """Projector pixels (N, 2) of the circle centres imaged at ``cam_points`` (N, 2) px.
-
-    Shorthand for :func:`local_homographies` followed by :func:`apply_homographies`.
-    """
-    return apply_homographies(local_homographies(proj_uv, board, cam_points), cam_points)
