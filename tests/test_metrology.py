@@ -6,6 +6,7 @@ import trimesh
 
 from tests.tolerances import (
     C2M_ON_SURFACE_M,
+    FLOAT64_EXACT,
     ICP_ROTATION_DEG,
     ICP_TRANSLATION_M,
     PLANE_FLATNESS_REL,
@@ -114,7 +115,7 @@ def test_closest_points_match_brute_force():
         every = trimesh.triangles.closest_point(
             mesh.triangles, np.repeat(q[None], len(mesh.faces), 0)
         )
-        assert abs(abs(d) - np.min(np.linalg.norm(every - q, axis=1))) < 1e-12
+        assert abs(abs(d) - np.min(np.linalg.norm(every - q, axis=1))) < FLOAT64_EXACT
     # Signs: 0.1 mm outside or inside along the normal of random surface points.
     points, faces = trimesh.sample.sample_surface(mesh, 200, seed=6)
     offset = rng.choice([-1e-4, 1e-4], size=200)

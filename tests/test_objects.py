@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from tests.tolerances import FLOAT64_EXACT
 from virtus.errors import InputError
 from virtus.objects import freeform_object, write_freeform_object
 
@@ -15,8 +16,8 @@ def test_default_object_is_a_closed_10cm_free_form_surface():
     assert 50_000 <= len(mesh.faces) <= 200_000
     assert mesh.is_watertight and mesh.is_winding_consistent
     assert mesh.volume > 0  # outward normals
-    assert max(mesh.extents) == pytest.approx(0.1, rel=1e-12)
-    assert np.allclose(mesh.bounds.mean(axis=0), 0.0, atol=1e-12)
+    assert max(mesh.extents) == pytest.approx(0.1, rel=FLOAT64_EXACT)
+    assert np.allclose(mesh.bounds.mean(axis=0), 0.0, atol=FLOAT64_EXACT)
     # Free-form: far from a sphere (radii vary widely) and curved everywhere differently.
     radii = np.linalg.norm(mesh.vertices - mesh.centroid, axis=1)
     assert radii.max() / radii.min() > 1.5

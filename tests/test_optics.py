@@ -46,7 +46,7 @@ def test_unproject_then_project_round_trip_over_the_full_image(intrinsics):
     pixels = np.vstack([pixels, edges])
     rays = intrinsics.unproject(pixels)
     assert np.isfinite(rays).all()
-    np.testing.assert_allclose(np.linalg.norm(rays, axis=1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(rays, axis=1), 1.0, atol=tol.FLOAT64_EXACT)
     back = intrinsics.project(rays * 0.8)
     assert np.abs(back - pixels).max() < tol.ROUND_TRIP_PX
 
@@ -93,7 +93,7 @@ def test_scaled_intrinsics_keep_pixel_edges():
     assert (small.width, small.height) == (240, 240)
     point = [[0.05, -0.03, 1.0]]
     big_px, small_px = REALISTIC.project(point)[0], small.project(point)[0]
-    np.testing.assert_allclose((big_px + 0.5) * 0.25 - 0.5, small_px, atol=1e-12)
+    np.testing.assert_allclose((big_px + 0.5) * 0.25 - 0.5, small_px, atol=tol.FLOAT64_EXACT)
 
 
 def test_opencv_and_dict_round_trips():
@@ -111,16 +111,20 @@ def test_pose_composition_inverse_and_parameterisations():
     b2c = Pose.from_euler("xyz", rng.uniform(-90, 90, 3), t=rng.normal(size=3))
     points_a = rng.normal(size=(20, 3))
     a2c = b2c @ a2b
-    np.testing.assert_allclose(a2c.apply(points_a), b2c.apply(a2b.apply(points_a)), atol=1e-12)
-    np.testing.assert_allclose((a2b.inverse() @ a2b).matrix, np.eye(4), atol=1e-12)
-    np.testing.assert_allclose(Pose.from_quat(a2b.as_quat(), a2b.t).R, a2b.R, atol=1e-12)
-    np.testing.assert_allclose(Pose.from_rotvec(a2b.rotvec).R, a2b.R, atol=1e-12)
+    np.testing.assert_allclose(
+        a2c.apply(points_a), b2c.apply(a2b.apply(points_a)), atol=tol.FLOAT64_EXACT
+    )
+    np.testing.assert_allclose((a2b.inverse() @ a2b).matrix, np.eye(4), atol=tol.FLOAT64_EXACT)
+    np.testing.assert_allclose(
+        Pose.from_quat(a2b.as_quat(), a2b.t).R, a2b.R, atol=tol.FLOAT64_EXACT
+    )
+    np.testing.assert_allclose(Pose.from_rotvec(a2b.rotvec).R, a2b.R, atol=tol.FLOAT64_EXACT)
     R_cv, _ = cv2.Rodrigues(a2b.rotvec)
-    np.testing.assert_allclose(R_cv, a2b.R, atol=1e-12)
+    np.testing.assert_allclose(R_cv, a2b.R, atol=tol.FLOAT64_EXACT)
     assert Pose.from_dict(json.loads(json.dumps(a2c.to_dict()))) == a2c
     np.testing.assert_allclose(Pose.from_matrix(a2c.matrix).matrix, a2c.matrix)
     np.testing.assert_allclose(
-        a2c.apply_direction(points_a), a2c.apply(points_a) - a2c.t, atol=1e-12
+        a2c.apply_direction(points_a), a2c.apply(points_a) - a2c.t, atol=tol.FLOAT64_EXACT
     )
 
 
@@ -147,7 +151,7 @@ def test_default_rig_reproduces_the_paper():
     np.testing.assert_allclose(rig.proj2cam.t, [-0.125, 0.1, 0.0])
     # toe-in: the projector's optical axis passes through the camera axis at 1 m
     centre_in_proj = rig.cam2proj.apply([[0.0, 0.0, 1.0]])[0]
-    np.testing.assert_allclose(centre_in_proj[:2], 0.0, atol=1e-12)
+    np.testing.assert_allclose(centre_in_proj[:2], 0.0, atol=tol.FLOAT64_EXACT)
     np.testing.assert_allclose(proj.project(centre_in_proj[None])[0], [455.5, 569.5])
     # coverage: every camera pixel of a fronto-parallel plane at 1 m is lit by the projector
     corners = cam.unproject([[-0.5, -0.5], [959.5, -0.5], [-0.5, 959.5], [959.5, 959.5]])
@@ -201,7 +205,9 @@ def test_inverse_camera_model_of_the_default_projector():
     distances = np.linspace(0.4, 1.0, 7)
     sizes = np.array([projected_size(projector, z) for z in distances])
     # exactly linear in Z: size / Z is the same at every distance
-    np.testing.assert_allclose(sizes / distances[:, None], [[0.5, 0.625]] * 7, rtol=1e-12)
+    np.testing.assert_allclose(
+        sizes / distances[:, None], [[0.5, 0.625]] * 7, rtol=tol.FLOAT64_EXACT
+    )
 
 
 # -- bad input ----------------------------------------------------------------------------------

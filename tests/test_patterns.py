@@ -196,7 +196,7 @@ def test_decode_without_uniform_frames_thresholds_on_the_phase_background() -> N
     result = sequence.decode(frames, full_scale=255.0)
     assert result.mask.all()
     error = result.proj_uv[0] - np.stack([u, v], axis=-1)
-    assert np.max(np.abs(error)) < 1e-9
+    assert np.max(np.abs(error)) < tol.DECODE_EXACT_PX
 
 
 @pytest.mark.parametrize("steps", [3, 18])
@@ -237,7 +237,7 @@ def test_absent_direction_gives_nan() -> None:
     assert np.isnan(result.phase_h).all() and np.isnan(result.proj_uv[..., 1]).all()
     assert not result.mask_h.any()
     np.testing.assert_array_equal(result.mask, result.mask_v)
-    np.testing.assert_allclose(result.proj_uv[..., 0], u, atol=1e-9)
+    np.testing.assert_allclose(result.proj_uv[..., 0], u, atol=tol.DECODE_EXACT_PX)
     uniform_only = PatternSequence(120, 80, (Frame("white"), Frame("black")))
     assert not uniform_only.decode(np.zeros((2, 3, 4), dtype=np.uint8)).mask.any()
 

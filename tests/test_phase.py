@@ -29,7 +29,7 @@ def test_wrap_range() -> None:
     wrapped = phase.wrap(values)
     assert np.all(wrapped >= -np.pi) and np.all(wrapped < np.pi)
     assert wrapped[1] == -np.pi  # +pi belongs to the next branch
-    assert_phase_equal(wrapped, values, 1e-12)
+    assert_phase_equal(wrapped, values, tol.FLOAT64_EXACT)
 
 
 @pytest.mark.parametrize("steps", [3, 4, 5, 7, 18])
@@ -42,8 +42,8 @@ def test_wrapped_phase_recovers_phase_background_modulation(steps: int) -> None:
     assert got_phi.shape == phi.shape
     assert np.all(got_phi >= -np.pi) and np.all(got_phi < np.pi)
     assert_phase_equal(got_phi, phi, tol.PHASE_EXACT_RAD)
-    np.testing.assert_allclose(got_a, a, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(got_b, b, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(got_a, a, rtol=0, atol=tol.INTENSITY_EXACT_DN)
+    np.testing.assert_allclose(got_b, b, rtol=0, atol=tol.INTENSITY_EXACT_DN)
 
 
 def test_wrapped_phase_sign_convention() -> None:
@@ -89,7 +89,7 @@ def test_unwrap_gray_with_complement_fixes_edge_misreads() -> None:
     g_read = np.floor(2 * (u + rng.uniform(-0.5, 0.5, u.size)) / period + 1).astype(np.int64)
     assert np.sum(k1_read != np.floor(u / period + 0.5)) > 50  # misreads do happen
     absolute = phase.unwrap_gray(wrapped, k1_read, phase.complementary_order(g_read))
-    np.testing.assert_allclose(absolute, true_phase, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(absolute, true_phase, rtol=0, atol=tol.PHASE_EXACT_RAD)
     # Without the complement the misreads stay: one-period jumps.
     plain = phase.unwrap_gray(wrapped, k1_read)
     assert np.max(np.abs(plain - true_phase)) > np.pi
@@ -100,7 +100,9 @@ def test_heterodyne_unwrapping_is_exact_and_checks_coverage() -> None:
     u = np.linspace(-0.5, 1139.5, 20001)
     wrapped = [phase.wrap(TWO_PI * u / p) for p in periods]
     absolute, residual = phase.unwrap_heterodyne(wrapped, periods, 1140)
-    np.testing.assert_allclose(phase.phase_to_coordinate(absolute, periods[0]), u, atol=1e-9)
+    np.testing.assert_allclose(
+        phase.phase_to_coordinate(absolute, periods[0]), u, atol=tol.DECODE_EXACT_PX
+    )
     assert np.max(residual) < 1e-6
     with pytest.raises(InputError) as info:
         phase.unwrap_heterodyne(wrapped[:1] + wrapped[2:], [periods[0], periods[2]], 1140)

@@ -3,6 +3,12 @@
 Sections belong to modules; add entries to your module's section only.
 """
 
+# --- shared -----------------------------------------------------------------------------
+#: float64 closed forms of a few operations on values of order 1 (rotations, unit vectors,
+#: pixel maps, metres near 1 m): rounding leaves ~1e-15; 1e-12 allows a few hundred
+#: roundings and still fails on any formula, sign or convention error.
+FLOAT64_EXACT = 1e-12
+
 # --- optics -----------------------------------------------------------------------------
 #: project(unproject(p)) vs p over the whole image with realistic distortion. The iterative
 #: undistortion converges to machine precision; 1e-6 px is the issue's requirement.
@@ -16,6 +22,13 @@ PROJECTED_SIZE_M = 1e-4
 #: decoding noise-free float frames: the least-squares phase is exact up to float rounding
 #: (measured ~1e-13 rad); 1e-9 rad still fails on any sign or shift error.
 PHASE_EXACT_RAD = 1e-9
+#: projector coordinates decoded from the same noise-free frames or exact wrapped phases:
+#: u_p = T phi / (2 pi) turns ~1e-13 rad into ~1e-12 px; 1e-9 px fails on any sign, shift
+#: or fringe-order error (a whole period, >= 10 px).
+DECODE_EXACT_PX = 1e-9
+#: background A and modulation B from the same frames: float64 least squares on values of at
+#: most a few hundred digital numbers, rounding ~1e-13 DN.
+INTENSITY_EXACT_DN = 1e-9
 #: decode RMS after 8-bit camera quantisation (issue requirement). Quantisation (0.29 DN
 #: RMS) gives 0.004 px (18 steps) to 0.007 px (6-step heterodyne) measured at B ~ 70 DN.
 DECODE_RMS_PX = 0.02
