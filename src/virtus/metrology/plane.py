@@ -33,8 +33,7 @@ class PlaneFit:
         a camera at the origin of the points' frame).
     offset : metres, ``normal . x = offset`` on the plane.
     centroid : (3,) float64 mean of the inliers, metres.
-    inliers : (N,) bool.
-    inlier_ratio : fraction of inliers.
+    inliers : (N,) bool (:attr:`inlier_ratio` is their fraction).
     rms : RMS distance of the inliers to the plane, metres.
     flatness : peak-to-valley of the inliers' signed distances, metres.
     distances : (N,) float64 signed distances of every point, metres.
@@ -45,11 +44,15 @@ class PlaneFit:
     offset: float
     centroid: np.ndarray
     inliers: np.ndarray
-    inlier_ratio: float
     rms: float
     flatness: float
     distances: np.ndarray
     threshold: float | None
+
+    @property
+    def inlier_ratio(self) -> float:
+        """Fraction of inliers, 0..1 (derived from :attr:`inliers`)."""
+        return float(self.inliers.mean())
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary in millimetres."""
@@ -108,7 +111,6 @@ def fit_plane(
         offset=float(normal @ centroid),
         centroid=centroid,
         inliers=inliers,
-        inlier_ratio=float(inliers.mean()),
         rms=float(np.sqrt(np.mean(d_in**2))),
         flatness=float(d_in.max() - d_in.min()),
         distances=distances,

@@ -51,8 +51,8 @@ class SphereFit:
     radius : metres.
     radius_std : standard uncertainty of the radius from the least-squares covariance
         (metres); it reflects noise only, not systematic errors.
-    inliers : (N,) bool, points within ``threshold`` of the fitted surface.
-    inlier_ratio : fraction of inliers, 0..1.
+    inliers : (N,) bool, points within ``threshold`` of the fitted surface
+        (:attr:`inlier_ratio` is their fraction).
     rms : RMS of the radial errors of the inliers, metres.
     radial_errors : (N,) float64 signed radial errors ``|p - c| - r`` of every point, metres
         (positive outside the sphere).
@@ -65,12 +65,16 @@ class SphereFit:
     radius: float
     radius_std: float
     inliers: np.ndarray
-    inlier_ratio: float
     rms: float
     radial_errors: np.ndarray
     threshold: float
     hist: Histogram
     iterations: int
+
+    @property
+    def inlier_ratio(self) -> float:
+        """Fraction of inliers, 0..1 (derived from :attr:`inliers`)."""
+        return float(self.inliers.mean())
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary in millimetres (per-point arrays left out)."""
@@ -232,7 +236,6 @@ def fit_sphere(
         radius=float(radius),
         radius_std=float(radius_std),
         inliers=inliers,
-        inlier_ratio=ratio,
         rms=float(np.sqrt(np.mean(inlier_res**2))),
         radial_errors=residual,
         threshold=float(thr),
