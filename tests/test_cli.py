@@ -42,3 +42,18 @@ def test_help_exits_with_status_zero(capsys):
         main(["rig", "info", "--help"])
     assert exit_info.value.code == 0
     assert "--rig" in capsys.readouterr().out
+
+
+def test_rig_info_json_reads_back_as_the_default_rig(capsys):
+    import json
+
+    from virtus.optics import Rig, default_rig
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(["rig", "info", "--json"])
+    assert exit_info.value.code == 0
+    data = json.loads(capsys.readouterr().out)
+    assert Rig.from_dict(data) == default_rig()
+    assert data["isaac"]["focal_length"] == pytest.approx(50.0)  # the paper's Isaac camera
+    size = data["projected_size_m"]
+    assert (size["width"], size["height"]) == pytest.approx((0.5, 0.625))

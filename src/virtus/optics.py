@@ -615,6 +615,7 @@ class IsaacCameraParams:
     vertical_aperture_offset: float = 0.0
 
     def to_dict(self) -> dict[str, float]:
+        """The five parameters by name, in this object's length unit."""
         return {
             "focal_length": self.focal_length,
             "horizontal_aperture": self.horizontal_aperture,
@@ -698,6 +699,19 @@ def projected_size(
     rays = (np.linalg.inv(intrinsics.K) @ corners.T).T @ rotation.T
     points = rays * (z / rays[:, 2:3])
     return float(abs(points[1, 0] - points[0, 0])), float(abs(points[1, 1] - points[0, 1]))
+
+
+def rig_info(rig: Rig, pixel_size_mm: float) -> dict[str, Any]:
+    """The rig schema of ``rig`` (metres) plus ``isaac``: Isaac Sim camera parameters in mm
+    for square pixels of ``pixel_size_mm``; ``projected_size_m``: the projector's footprint
+    at 1 m (:func:`projected_size`); and ``baseline_m``."""
+    info = rig.to_dict()
+    isaac = isaac_params(rig.camera.intrinsics, pixel_size_mm).to_dict()
+    info["isaac"] = {"units": "mm", "pixel_size": pixel_size_mm, **isaac}
+    width, height = projected_size(rig.projector.intrinsics, 1.0)
+    info["projected_size_m"] = {"distance_m": 1.0, "width": width, "height": height}
+    info["baseline_m"] = rig.baseline_m
+    return info
 
 
 #: The paper's camera: Isaac focal length 50 and horizontal aperture 20.9995 (same units).

@@ -12,21 +12,6 @@ import typer
 PAPER_PIXEL_SIZE_MM = 20.9995 / 960
 
 
-def rig_info(rig_path: Path | None, pixel_size_mm: float) -> dict[str, Any]:
-    """The rig schema of ``rig_path`` (or the default rig) plus Isaac Sim camera parameters
-    (mm, for square pixels of ``pixel_size_mm``) and the projector's footprint at 1 m."""
-    from virtus.optics import Rig, default_rig, isaac_params, projected_size
-
-    rig = Rig.load_json(rig_path) if rig_path is not None else default_rig()
-    info = rig.to_dict()
-    isaac = isaac_params(rig.camera.intrinsics, pixel_size_mm).to_dict()
-    info["isaac"] = {"units": "mm", "pixel_size": pixel_size_mm, **isaac}
-    width, height = projected_size(rig.projector.intrinsics, 1.0)
-    info["projected_size_m"] = {"distance_m": 1.0, "width": width, "height": height}
-    info["baseline_m"] = rig.baseline_m
-    return info
-
-
 def register(app: typer.Typer) -> None:
     rig_app = typer.Typer(help="Inspect camera-projector rigs.", no_args_is_help=True)
     app.add_typer(rig_app, name="rig")
@@ -42,7 +27,10 @@ def register(app: typer.Typer) -> None:
         ] = PAPER_PIXEL_SIZE_MM,
     ) -> None:
         """Print the rig (DESIGN schema), Isaac Sim camera parameters and projected size."""
-        data = rig_info(rig, pixel_size_mm)
+        from virtus.optics import Rig, default_rig, rig_info
+
+        the_rig = Rig.load_json(rig) if rig is not None else default_rig()
+        data = rig_info(the_rig, pixel_size_mm)
         if json_out:
             typer.echo(json.dumps(data, indent=2))
             return
