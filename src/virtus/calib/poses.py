@@ -88,6 +88,7 @@ class BoardPose:
     board2cam: Pose
 
     def to_dict(self) -> dict:
+        """JSON-ready ``{name, board2cam: {R, t}}`` (metres)."""
         return {"name": self.name, "board2cam": self.board2cam.to_dict()}
 
     @classmethod

@@ -110,6 +110,7 @@ class StereoCalibration:
 
     @property
     def rms_px(self) -> dict[str, float]:
+        """RMS reprojection errors (px) of the camera, projector and stereo calibrations."""
         return {
             "camera": self.camera.rms_px,
             "projector": self.projector.rms_px,

@@ -49,6 +49,7 @@ class MeshEvaluation:
     c2m: C2MResult
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: object name, mesh file, point count and the C2M summary (mm)."""
         out = {"object": self.name, "mesh": self.path, "n_points": self.n_points}
         out.update(self.c2m.to_dict())
         return out

@@ -87,6 +87,8 @@ class TurntableResult:
     timing_s: dict[str, float] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary: views, point counts, object2cam poses (metres), ICP
+        refinements (deg, mm), the merged cloud's C2M summary (mm) and timings (s)."""
         return {
             "n_views": len(self.view_counts),
             "view_counts": self.view_counts,
