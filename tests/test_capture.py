@@ -129,3 +129,13 @@ def test_capture_module_does_not_load_mitsuba():
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "[]"
+
+
+@pytest.mark.parametrize("workers", [0, -1, 2.5])
+def test_frame_writer_refuses_a_bad_thread_count(tmp_path, workers):
+    from virtus.capture import write_frames
+    from virtus.errors import InputError
+
+    with pytest.raises(InputError, match=r"^workers: expected an integer >= 1"):
+        write_frames(tmp_path, np.zeros((1, 4, 4), np.uint8), workers=workers)
+    assert not list(tmp_path.glob("*.png"))

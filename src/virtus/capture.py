@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from virtus import __version__
+from virtus.checks import positive_int
 from virtus.errors import InputError, VirtusError
 from virtus.jsonio import write_json
 from virtus.optics import Rig
@@ -89,6 +90,13 @@ def _frame_name(index: int) -> str:
     return f"{index:03d}.png"
 
 
+def _pool_size(workers: int | None) -> int:
+    """Threads for PNG encoding/decoding: ``workers`` (>= 1), or the number of CPUs."""
+    if workers is None:
+        return os.cpu_count() or 1
+    return positive_int("workers", workers)
+
+
 def write_frames(
     directory: str | Path,
     frames: np.ndarray,
@@ -113,6 +121,7 @@ def write_frames(
         )
     if not 0 <= compression <= 9:
         raise InputError("compression", "a PNG compression level 0-9", compression)
+    threads = _pool_size(workers)
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     paths = [directory / _frame_name(i) for i in range(len(frames))]
@@ -122,13 +131,14 @@ def write_frames(
         if not cv2.imwrite(str(paths[index]), frames[index], params):
             raise OSError(f"could not write {paths[index]}")
 
-    with ThreadPoolExecutor(max_workers=workers or os.cpu_count() or 1) as pool:
+    with ThreadPoolExecutor(max_workers=threads) as pool:
         list(pool.map(write, range(len(frames))))
     return paths
 
 
 def read_frames(paths: list[Path], workers: int | None = None) -> np.ndarray:
-    """Read grey PNG frames (unchanged bit depth) into a (F, H, W) array."""
+    """Read grey PNG frames (unchanged bit depth) into a (F, H, W) array; ``workers``: decoding
+    threads (default: the number of CPUs)."""
     import cv2
 
     def read(path: Path) -> np.ndarray:
@@ -139,7 +149,7 @@ def read_frames(paths: list[Path], workers: int | None = None) -> np.ndarray:
             raise InputError(str(path), "a single-channel (grey) image", f"shape {image.shape}")
         return image
 
-    with ThreadPoolExecutor(max_workers=workers or os.cpu_count() or 1) as pool:
+    with ThreadPoolExecutor(max_workers=_pool_size(workers)) as pool:
         images = list(pool.map(read, paths))
     shapes = {(image.shape, image.dtype) for image in images}
     if len(shapes) != 1:
