@@ -179,3 +179,9 @@ def test_cli_turntable_with_refinement(tmp_path: Path, capsys) -> None:
     for angle_deg, shift_mm in report["refinement_deg_mm"]:
         assert angle_deg < 0.01 and shift_mm < 0.01
     assert (out / "view_0" / "capture.json").is_file() and (out / "merged.ply").is_file()
+
+
+def test_scan_with_a_missing_calibration_fails_before_rendering(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="^calibration"):
+        scan(default_scene(), tmp_path / "out", calibration=tmp_path / "missing.json")
+    assert not (tmp_path / "out").exists()  # no capture left behind

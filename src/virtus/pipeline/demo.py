@@ -15,7 +15,6 @@
 
 from __future__ import annotations
 
-import json
 import platform
 import time
 from dataclasses import asdict, dataclass, field
@@ -25,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from virtus.errors import VirtusError
+from virtus.jsonio import write_json
 from virtus.metrology import SphereFit, fit_sphere
 from virtus.pipeline.scan import Reconstruction, ScanSettings, reconstruct, scan
 
@@ -255,7 +255,7 @@ def run_demo(
             "radial_error_map": "scan/sphere_radial_error.npy",
         },
     }
-    (root / "metrics.json").write_text(json.dumps(metrics, indent=2, default=_json) + "\n")
+    write_json(root / "metrics.json", metrics)
     return DemoResult(root, metrics, fit, calibration)
 
 
@@ -282,13 +282,3 @@ def _provenance() -> dict[str, Any]:
         "cpu_count": os.cpu_count(),
         "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
     }
-
-
-def _json(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")

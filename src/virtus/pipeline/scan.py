@@ -323,6 +323,13 @@ def scan(
 
     settings = settings or ScanSettings()
     true_rig = rig or default_rig()
+    # Read the calibration before rendering: a bad file must not leave a capture behind.
+    if calibration is None:
+        used = true_rig
+    elif isinstance(calibration, Rig):
+        used = calibration
+    else:
+        used = load_rig_file(calibration)
     proj = true_rig.projector.intrinsics
     sequence = default_sequence(proj.width, proj.height)
     directory = Path(out_dir)
@@ -359,12 +366,6 @@ def scan(
     timing["decode_s"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    if calibration is None:
-        used = true_rig
-    elif isinstance(calibration, Rig):
-        used = calibration
-    else:
-        used = load_rig_file(calibration)
     recon = reconstruct(
         used, decoded.proj_uv, decoded.mask, use=settings.use, edge_max_step=settings.edge_max_step
     )
