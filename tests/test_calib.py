@@ -102,7 +102,9 @@ def test_board_texture_has_the_circles_area_and_their_centroids():
     texture = board.texture(pixel_size_m=pixel, blur_m=3e-4)
     darkness = (board.background_level - texture) / (board.background_level - board.circle_level)
     circle_area = np.pi * (board.circle_diameter_m / 2) ** 2
-    assert darkness.sum() * pixel**2 == pytest.approx(board.n_points * circle_area, rel=1e-3)
+    assert darkness.sum() * pixel**2 == pytest.approx(
+        board.n_points * circle_area, rel=tol.CALIB_TEXTURE_AREA_REL
+    )
     # Centroid of the first circle's texels (x along columns, y along rows).
     rows, cols = np.mgrid[0 : texture.shape[0], 0 : texture.shape[1]]
     x = (cols + 0.5) * pixel - board.plane_size_m[0] / 2
@@ -110,8 +112,8 @@ def test_board_texture_has_the_circles_area_and_their_centroids():
     centre = board.object_points[0]
     near = np.hypot(x - centre[0], y - centre[1]) < 0.4 * board.center_distance_m
     w = darkness * near
-    assert (w * x).sum() / w.sum() == pytest.approx(centre[0], abs=pixel / 100)
-    assert (w * y).sum() / w.sum() == pytest.approx(centre[1], abs=pixel / 100)
+    assert (w * x).sum() / w.sum() == pytest.approx(centre[0], abs=tol.CALIB_TEXTURE_CENTROID_M)
+    assert (w * y).sum() / w.sum() == pytest.approx(centre[1], abs=tol.CALIB_TEXTURE_CENTROID_M)
 
 
 @pytest.mark.parametrize(
@@ -143,7 +145,7 @@ def test_paper_poses_are_18_and_inside_both_fields():
     poses = paper_poses(RIG, board)
     assert len(poses) == 18 == len({p.name for p in poses})
     tilts = [np.degrees(np.arccos(p.board2cam.R[2, 2])) for p in poses]
-    assert max(tilts) >= 30 - 1e-9
+    assert max(tilts) >= 30 - tol.CALIB_POSE_TILT_DEG
     # Every circle projects inside both images.
     for pose in poses:
         cam_uv = _true_centres(board, pose.board2cam)
@@ -215,7 +217,7 @@ def test_centroid_bias_vanishes_for_a_fronto_parallel_centred_circle():
     front = Pose.identity() @ Pose(np.eye(3), (0.0, 0.0, 1.0))
     bias = centroid_bias(Intrinsics(2000, 2000, 0, 0, 960, 960), board, front)
     # An affine view (fronto-parallel) maps centroids to centroids.
-    assert np.abs(bias).max() < 1e-9
+    assert np.abs(bias).max() < tol.CALIB_FRONTO_PARALLEL_BIAS_PX
 
 
 # -- projector points ----------------------------------------------------------------------
@@ -266,8 +268,8 @@ def test_calibration_recovers_the_rig_from_exact_observations():
         assert abs(error[device]["fx_rel_error"]) < tol.CALIB_EXACT_FOCAL_REL
         assert abs(error[device]["fy_rel_error"]) < tol.CALIB_EXACT_FOCAL_REL
         assert error[device]["principal_point_error_px"] < tol.CALIB_EXACT_PRINCIPAL_POINT_PX
-    assert abs(error["proj2cam"]["baseline_error_m"]) < 1e-6
-    assert error["proj2cam"]["rotation_error_deg"] < 1e-4
+    assert abs(error["proj2cam"]["baseline_error_m"]) < tol.CALIB_EXACT_BASELINE_M
+    assert error["proj2cam"]["rotation_error_deg"] < tol.CALIB_EXACT_ROTATION_DEG
 
 
 def test_undetected_pose_is_dropped_with_a_warning_naming_it():
@@ -317,7 +319,9 @@ def test_truth_error_reports_known_perturbations():
     assert error["camera"]["principal_point_error_px"] == pytest.approx(0.5)
     assert error["projector"]["fx_rel_error"] == 0.0
     assert error["proj2cam"]["baseline_error_m"] == pytest.approx(1e-3 * RIG.baseline_m)
-    assert error["proj2cam"]["rotation_error_deg"] == pytest.approx(0.02, rel=1e-6)
+    assert error["proj2cam"]["rotation_error_deg"] == pytest.approx(
+        0.02, rel=tol.CALIB_TRUTH_ROTATION_REL
+    )
 
 
 # -- files ---------------------------------------------------------------------------------

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from tests.tolerances import FLOAT64_EXACT
+from tests.tolerances import FLOAT64_EXACT, MESH_FILE_REL
 from virtus.errors import InputError
 from virtus.objects import freeform_object, write_freeform_object
 
@@ -36,7 +36,7 @@ def test_write_and_reload(tmp_path: Path, suffix: str):
     path = write_freeform_object(tmp_path / "sub" / f"blob{suffix}", size_m=0.08, subdivisions=3)
     mesh = trimesh.load(path, force="mesh")
     assert len(mesh.faces) == 1280
-    assert max(mesh.extents) == pytest.approx(0.08, rel=1e-6)  # STL stores float32
+    assert max(mesh.extents) == pytest.approx(0.08, rel=MESH_FILE_REL)
 
 
 def test_bad_arguments(tmp_path: Path):

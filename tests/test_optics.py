@@ -70,7 +70,7 @@ def test_undistort_agrees_with_opencv_where_opencv_converges():
     xy = REALISTIC.undistort_normalized(
         (pixels - [REALISTIC.cx, REALISTIC.cy]) / [REALISTIC.fx, REALISTIC.fy]
     )
-    assert np.abs(xy - reference).max() * REALISTIC.fx < 1e-6
+    assert np.abs(xy - reference).max() * REALISTIC.fx < tol.OPENCV_UNDISTORT_PX
 
 
 def test_pixel_centre_convention():
@@ -145,7 +145,7 @@ def test_default_rig_reproduces_the_paper():
     rig = default_rig()
     cam, proj = rig.camera.intrinsics, rig.projector.intrinsics
     assert (cam.width, cam.height, proj.width, proj.height) == (960, 960, 912, 1140)
-    assert cam.fx == pytest.approx(2285.77, abs=0.005) and cam.fx == cam.fy
+    assert cam.fx == pytest.approx(2285.77, abs=tol.PAPER_FOCAL_PX) and cam.fx == cam.fy
     assert (cam.cx, cam.cy) == (479.5, 479.5)
     assert (proj.fx, proj.fy, proj.cx, proj.cy) == (1824.0, 1824.0, 455.5, 569.5)
     np.testing.assert_allclose(rig.proj2cam.t, [-0.125, 0.1, 0.0])
@@ -194,7 +194,9 @@ def test_isaac_parameters_round_trip():
         p.vertical_aperture_offset,
     )
     for name in ("fx", "fy", "cx", "cy"):
-        assert getattr(back, name) == pytest.approx(getattr(shifted, name), abs=1e-9)
+        assert getattr(back, name) == pytest.approx(
+            getattr(shifted, name), abs=tol.ISAAC_ROUND_TRIP_PX
+        )
 
 
 def test_inverse_camera_model_of_the_default_projector():

@@ -154,7 +154,9 @@ def test_gray_code_numbers_fringe_orders_and_complement_shifts_by_half_a_period(
         shift >>= 1
     np.testing.assert_array_equal(binary, np.floor(2 * v / period + 1))
     changes = np.flatnonzero(np.diff(code)) + 0.5  # between pixel centres
-    np.testing.assert_allclose(changes, np.arange(1, changes.size + 1) * period / 2, atol=0.5)
+    np.testing.assert_allclose(
+        changes, np.arange(1, changes.size + 1) * period / 2, atol=tol.GRAY_EDGE_PX
+    )
 
 
 # --- decoding ---------------------------------------------------------------------------
@@ -181,9 +183,11 @@ def test_ideal_encode_decode_round_trip(make) -> None:
     rms = np.sqrt(np.mean(error**2, axis=0))
     assert np.all(rms < tol.DECODE_RMS_PX), rms
     assert np.max(np.abs(error)) < tol.DECODE_MAX_PX  # no fringe-order error anywhere
-    np.testing.assert_allclose(result.phase_v[0], TWO_PI * u / periods[0], atol=0.01)
-    np.testing.assert_allclose(result.background[0], a + b / 2, atol=1.0)
-    np.testing.assert_allclose(result.modulation[0], b / 2, atol=1.0)
+    np.testing.assert_allclose(
+        result.phase_v[0], TWO_PI * u / periods[0], atol=tol.DECODE_PHASE_8BIT_RAD
+    )
+    np.testing.assert_allclose(result.background[0], a + b / 2, atol=tol.INTENSITY_8BIT_DN)
+    np.testing.assert_allclose(result.modulation[0], b / 2, atol=tol.INTENSITY_8BIT_DN)
 
 
 def test_decode_without_uniform_frames_thresholds_on_the_phase_background() -> None:

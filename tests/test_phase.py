@@ -103,7 +103,7 @@ def test_heterodyne_unwrapping_is_exact_and_checks_coverage() -> None:
     np.testing.assert_allclose(
         phase.phase_to_coordinate(absolute, periods[0]), u, atol=tol.DECODE_EXACT_PX
     )
-    assert np.max(residual) < 1e-6
+    assert np.max(residual) < tol.HETERODYNE_RESIDUAL_EXACT
     with pytest.raises(InputError) as info:
         phase.unwrap_heterodyne(wrapped[:1] + wrapped[2:], [periods[0], periods[2]], 1140)
     assert info.value.name == "periods"  # beat 144 px does not cover 1140 px

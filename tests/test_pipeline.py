@@ -6,7 +6,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.tolerances import C2M_MAE_M, PIPELINE_FORMAT_M, PIPELINE_TRUE_RIG_M
+from tests.tolerances import (
+    C2M_MAE_M,
+    PIPELINE_FORMAT_M,
+    PIPELINE_TRUE_RIG_M,
+    TURNTABLE_ICP_ANGLE_DEG,
+    TURNTABLE_ICP_SHIFT_M,
+    TURNTABLE_REFINE_SHIFT_MM,
+)
 from virtus.cli import main
 from virtus.errors import InputError, VirtusError
 from virtus.optics import default_rig
@@ -100,8 +107,8 @@ def test_turntable_merge_in_the_object_frame(tmp_path: Path) -> None:
     assert len(result.view_counts) == 4 and min(result.view_counts) > 20_000
     assert result.c2m.mae <= C2M_MAE_M
     # The known turntable poses already put the views in place: ICP corrects almost nothing.
-    assert result.c2m.cloud2mesh.angle_deg < 0.01
-    assert np.linalg.norm(result.c2m.cloud2mesh.t) < 1e-4
+    assert result.c2m.cloud2mesh.angle_deg < TURNTABLE_ICP_ANGLE_DEG
+    assert np.linalg.norm(result.c2m.cloud2mesh.t) < TURNTABLE_ICP_SHIFT_M
     merged = read_ply(tmp_path / "tt" / "merged.ply")
     assert merged.frame == "object" and len(merged) == result.merged.shape[0]
     report = json.loads((tmp_path / "tt" / "turntable.json").read_text())
@@ -177,7 +184,7 @@ def test_cli_turntable_with_refinement(tmp_path: Path, capsys) -> None:
     assert report["n_views"] == 2 and report["refine"] is True
     # True rig and known poses: the per-view ICP refinement moves each view very little.
     for angle_deg, shift_mm in report["refinement_deg_mm"]:
-        assert angle_deg < 0.01 and shift_mm < 0.01
+        assert angle_deg < TURNTABLE_ICP_ANGLE_DEG and shift_mm < TURNTABLE_REFINE_SHIFT_MM
     assert (out / "view_0" / "capture.json").is_file() and (out / "merged.ply").is_file()
 
 

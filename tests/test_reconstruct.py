@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from tests.tolerances import TRIANGULATION_M
+from tests.tolerances import NORMALS_EXACT, TRIANGULATION_M
 from virtus.errors import InputError
 from virtus.optics import Camera, Intrinsics, Projector, Rig, default_rig
 from virtus.reconstruct import (
@@ -106,7 +106,7 @@ def test_image_functions_on_a_plane() -> None:
     assert np.array_equal(point_map[pixels[:, 0], pixels[:, 1]], flat)
     normals = normals_from_points(point_map)
     inner = normals[mask]
-    assert np.max(np.abs(inner - (0.0, 0.0, -1.0))) < 1e-6
+    assert np.max(np.abs(inner - (0.0, 0.0, -1.0))) < NORMALS_EXACT
 
 
 def test_bad_input_names_the_argument() -> None:

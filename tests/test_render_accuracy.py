@@ -80,7 +80,7 @@ def tilted_plane_decoded(sequence):
 
 def _rms_error(rendering, decoded) -> np.ndarray:
     valid = rendering.gt.mask & decoded.mask
-    assert valid.mean() > 0.99
+    assert valid.mean() > tol.DECODE_VALID_FRACTION_MIN
     error = decoded.proj_uv[valid] - rendering.gt.proj_uv[valid]
     return np.sqrt(np.mean(error**2, axis=0))
 
@@ -126,4 +126,4 @@ def test_default_sphere_radius_from_decoded_frames(sequence, lookup: str) -> Non
     points = points_from_decoded(rig, decoded.proj_uv, selected)[selected]
     centre, radius = fit_sphere_lsq(points)
     assert abs(radius - 0.1) < tol.SPHERE_RADIUS_M, radius
-    np.testing.assert_allclose(centre, (0.0, 0.0, 1.0), atol=10 * tol.SPHERE_RADIUS_M)
+    np.testing.assert_allclose(centre, (0.0, 0.0, 1.0), atol=tol.SPHERE_CENTRE_DECODED_M)

@@ -9,6 +9,11 @@ Sections belong to modules; add entries to your module's section only.
 #: roundings and still fails on any formula, sign or convention error.
 FLOAT64_EXACT = 1e-12
 
+# --- objects ----------------------------------------------------------------------------
+#: size of a mesh written to STL/PLY and read back: the files hold float32 vertices, ~6e-8
+#: relative rounding (measured 2.2e-8 for both formats).
+MESH_FILE_REL = 1e-6
+
 # --- optics -----------------------------------------------------------------------------
 #: project(unproject(p)) vs p over the whole image with realistic distortion. The iterative
 #: undistortion converges to machine precision; 1e-6 px is the issue's requirement.
@@ -17,6 +22,15 @@ ROUND_TRIP_PX = 1e-6
 OPENCV_AGREEMENT_PX = 1e-9
 #: inverse camera model at Z = 1 m vs the nominal 0.500 m x 0.625 m (issue requirement).
 PROJECTED_SIZE_M = 1e-4
+#: our Newton undistortion vs cv2.undistortPoints run to convergence (200 iterations, eps
+#: 1e-15): both reach the same inverse, measured 2e-13 px; 1e-6 px is the round-trip budget.
+OPENCV_UNDISTORT_PX = 1e-6
+#: default camera focal length vs the paper's 2285.77 px, which is quoted to two decimals
+#: (half a unit in the last place; measured 0.0013 px).
+PAPER_FOCAL_PX = 0.005
+#: Isaac camera parameters -> intrinsics -> back: a few float64 divisions on values of order
+#: 1000 px (measured exactly 0).
+ISAAC_ROUND_TRIP_PX = 1e-9
 
 # --- patterns / phase -------------------------------------------------------------------
 #: decoding noise-free float frames: the least-squares phase is exact up to float rounding
@@ -38,6 +52,19 @@ DECODE_MAX_PX = 0.1
 #: measured phase std vs sigma_phi = (sigma / B) sqrt(2 / N) (issue requirement: 20 %). With
 #: 40 000 pixels the std's own sampling error is 0.4 %, so a wrong N or B dependence fails.
 NOISE_STD_REL = 0.2
+#: Gray-code transitions vs the half-period boundaries k T / 2: transitions fall between pixel
+#: centres, so each sits exactly half a pixel from a boundary that is a pixel centre
+#: (measured 0.5 px everywhere); a transition one pixel off would be 1.5 px away.
+GRAY_EDGE_PX = 0.5
+#: wrapped phase of the finest period from 8-bit quantised frames (B / 2 = 60-95 DN):
+#: measured max 0.006 rad (default) and 0.0089 rad (heterodyne) over 20 000 points.
+DECODE_PHASE_8BIT_RAD = 0.01
+#: background A and modulation B from the same 8-bit frames: rounding to whole DN leaves
+#: measured max 0.28 DN (A) and 0.63 DN (B).
+INTENSITY_8BIT_DN = 1.0
+#: largest residual of heterodyne unwrapping from exact wrapped phases: float64 rounding
+#: (measured 7e-13 rad); a wrong beat or period ratio gives residuals of order 1 rad.
+HETERODYNE_RESIDUAL_EXACT = 1e-6
 
 # --- reconstruct ------------------------------------------------------------------------
 #: triangulating exact correspondences (issue requirement). Closed-form ray intersection in
@@ -52,6 +79,20 @@ PIPELINE_TRUE_RIG_M = 5e-5
 #: instead of JSON: both round-trip the parameters to ~1e-16 (measured), so the points agree
 #: to float rounding; 1 nm would catch a lost digit or a mm/m slip.
 PIPELINE_FORMAT_M = 1e-9
+#: unit normals of an exact point map of a fronto-parallel plane vs (0, 0, -1): float64
+#: cross products of neighbour differences (measured 7e-13).
+NORMALS_EXACT = 1e-6
+
+# --- pipeline (turntable, demo) ---------------------------------------------------------
+#: ICP correction after merging turntable views with the true rig and known poses (the views
+#: are already in place): measured 0.0012 deg and 2.8 um (4 views), 0.0008-0.0012 deg and
+#: 7e-5-1e-4 mm per view with --refine; what remains is the decoded clouds' noise.
+TURNTABLE_ICP_ANGLE_DEG = 0.01
+TURNTABLE_ICP_SHIFT_M = 1e-4
+TURNTABLE_REFINE_SHIFT_MM = 0.01
+#: RMS reprojection error of each calibration in `virtus demo` (18 poses, 4 spp): measured
+#: 0.002-0.005 px; bounds the demo's report only, CALIB_RMS_PX is the issue requirement.
+DEMO_CALIB_RMS_PX = 0.1
 
 # --- render -----------------------------------------------------------------------------
 #: renderer vs Mitsuba's own projector emitter, same (unjittered) sample positions: mean
@@ -73,6 +114,9 @@ DECODE_BILINEAR_RMS_PX = 0.02
 #: points leaves ~0.15 px (0.29 = 1/sqrt(12) without any averaging); the bounds show it is
 #: the staircase, neither smoothed away (< 0.08) nor larger than unfiltered steps.
 NEAREST_STAIRCASE_RMS_PX = (0.08, 0.29)
+#: share of pixels where both the decode and the ground truth are valid on the tilted plane
+#: (8 bit, 4 spp): measured 1.0 for both lookups; edge pixels may fail the modulation test.
+DECODE_VALID_FRACTION_MIN = 0.99
 #: ground-truth depth vs the analytic plane: Mitsuba intersects in float32 (~1e-7 relative
 #: at 1 m; measured 3e-7 m); issue requirement 1e-6 m.
 PLANE_DEPTH_M = 1e-6
@@ -82,10 +126,34 @@ GT_PROJ_UV_PX = 1e-4
 #: default sphere radius from decoded frames and the true rig (issue: 0.02 mm); measured
 #: 0.011 mm (nearest, the default) and 0.001 mm (bilinear).
 SPHERE_RADIUS_M = 2e-5
+#: sphere centre from the same fit: measured 14 um (nearest) and 1.3 um (bilinear).
+SPHERE_CENTRE_DECODED_M = 10 * SPHERE_RADIUS_M
 #: identical geometry traced two ways (box primitive vs the same box as a mesh, camera moved
 #: vs scene moved): Mitsuba intersects in float32, ~1e-7 m typically; a sphere's quadratic
 #: loses digits at grazing incidence (measured up to 3e-6 m at the limb).
 SAME_GEOMETRY_M = 1e-5
+#: frames of that identical geometry (camera vs scene moved): float32 hits flip the 8-bit
+#: rounding by 1 DN at a few pixels (measured 6e-4 of all values) ...
+SAME_GEOMETRY_FLIP_FRACTION = 1e-3
+#: ... and only where a supersample's shadow ray grazes an occluder more (measured 2 pixels).
+SAME_GEOMETRY_GRAZING_PIXELS = 5
+#: mean of the stratified sample offsets of a pixel: symmetric float64 grid, measured <= 1e-17.
+SAMPLE_OFFSET_MEAN_PX = 1e-15
+#: ground-truth normals are float32 (Mitsuba): unit length and plane normal to measured
+#: 1.6e-7 and 8.7e-8.
+GT_NORMAL = 1e-6
+#: white frame from synthesis vs the traced white radiance: the same float32 values
+#: (measured identical).
+SYNTHESIS_WHITE_REL = 1e-6
+#: one quantisation step: float32 radiance times exposure rounds the other way when it lies at
+#: a .5 midpoint (16-bit frames vs np.rint, and the Dr.Jit vs sparse synthesis paths).
+FRAME_ROUNDING_DN = 1
+#: share of values where the Dr.Jit and sparse paths differ by that step (float32 sums in
+#: another order): measured 5e-4.
+JIT_FLIP_FRACTION = 1e-3
+#: auto exposure puts the 99th percentile of the white frame at 0.9 x 255 = 229.5 DN; whole
+#: DN values can only come within 0.5 DN (measured 0.45 DN).
+AUTO_EXPOSURE_LEVEL_DN = 1.0
 
 # --- calib ------------------------------------------------------------------------------
 #: issue requirements for the end-to-end calibration (default rig, noise-free, 4 spp); the
@@ -117,6 +185,25 @@ CALIB_HOMOGRAPHY_STAIRCASE_RMS_PX = 0.02
 CALIB_EXACT_RMS_PX = 1e-3
 CALIB_EXACT_FOCAL_REL = 1e-6
 CALIB_EXACT_PRINCIPAL_POINT_PX = 0.01
+#: baseline and rotation of the same calibration from exact points: measured 5e-9 m and
+#: 1.8e-5 deg.
+CALIB_EXACT_BASELINE_M = 1e-6
+CALIB_EXACT_ROTATION_DEG = 1e-4
+#: printed board texture (blurred, 0.2 mm texels): total darkness vs n pi r^2; blur and
+#: pixelisation preserve the area to measured 1.1e-5 relative.
+CALIB_TEXTURE_AREA_REL = 1e-3
+#: centroid of one circle's texels vs its centre: 1 % of the test's 0.2 mm texel; symmetric
+#: pixelisation leaves measured 0.0014 texel (0.3 nm).
+CALIB_TEXTURE_CENTROID_M = 2e-6
+#: the paper's poses reach a 30 deg tilt: slack for float rounding in arccos (the largest
+#: tilt measured is 33.2 deg, so it is never used).
+CALIB_POSE_TILT_DEG = 1e-9
+#: centroid bias of a fronto-parallel centred circle, which is zero in closed form: float64
+#: rounding of the shoelace sums over the projected outline (measured 4e-13 px).
+CALIB_FRONTO_PARALLEL_BIAS_PX = 1e-9
+#: truth_error's rotation angle for a known 0.02 deg turn: atan2 form is well conditioned
+#: (measured 1.3e-14 relative).
+CALIB_TRUTH_ROTATION_REL = 1e-6
 #: recalibrating from saved observations: the same float64 inputs, but OpenCV's threaded
 #: reductions may sum in another order (measured differences 6e-12 in proj2cam entries).
 CALIB_RECALIBRATE_ATOL = 1e-9
@@ -131,10 +218,26 @@ CALIB_FILE_ROUND_TRIP = 1e-12
 SPHERE_RADIUS_REL = 1e-4
 #: sphere centre in the same test (metres); a biased fit moves it by far more than 5 um.
 SPHERE_CENTRE_M = 5e-6
+#: inlier ratio of that fit vs the true one: outliers inside the threshold band look like
+#: inliers (measured <= 0.0015) ...
+SPHERE_INLIER_RATIO_ABS = 0.01
+#: ... while true inliers are all kept (measured recall >= 0.9999).
+SPHERE_INLIER_RECALL_MIN = 0.97
+#: inlier RMS vs the 20 um noise: sampling error of 20k residuals, measured <= 0.6 %.
+SPHERE_RMS_REL = 0.1
+#: spheres through 4 exact points: closed-form float64 solve, measured 4.5e-15 m.
+FOUR_POINT_SPHERE_M = 1e-10
+#: 1 - |n_fit . n_true| of plane fits to 5000 points (with and without 23 % outliers):
+#: measured 5e-12. NB: 1e-6 allows a tilt of 1.4 mrad since 1 - cos is quadratic.
+PLANE_NORMAL_COS = 1e-6
+#: robust flatness: outliers accepted inside the +-0.1 mm threshold band can stretch the
+#: peak-to-valley up to the band's 2e-4 m width (measured 7e-5 m).
+PLANE_ROBUST_FLATNESS_MAX_M = 2e-4
 #: plane flatness (peak-to-valley) of 5000 uniform heights in +-25 um: the sample extremes
 #: fall within ~0.1 % of the band, the TLS plane tilt adds ~1 %.
 PLANE_FLATNESS_REL = 0.03
-#: C2M of points sampled on the mesh itself: exact closest points give float rounding only.
+#: C2M of points sampled on the mesh itself, or 0.1 mm off it along the face normal (signed
+#: distances): exact closest points give float rounding only (measured 5e-18 m off surface).
 C2M_ON_SURFACE_M = 1e-9
 #: ICP recovering a 2 deg / 3.6 mm transform from noise-free surface samples: converges to
 #: ~1e-9; 1e-5 deg and 1 um leave room for the linearised steps' final rounding.
