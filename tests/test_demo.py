@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.tolerances import DEMO_CALIB_RMS_PX
+from tests.tolerances import CALIB_RMS_PX
 from virtus.cli import main
 from virtus.pipeline.demo import TARGETS
 from virtus.ply import read_ply
@@ -24,7 +24,7 @@ def test_demo_meets_the_issue_targets(tmp_path: Path, capsys) -> None:
     metrics = json.loads((out / "metrics.json").read_text())
     calibration, sphere = metrics["calibration"], metrics["sphere"]
     for key in ("camera_rms_px", "projector_rms_px", "stereo_rms_px"):
-        assert 0 < calibration[key] < DEMO_CALIB_RMS_PX
+        assert 0 < calibration[key] <= CALIB_RMS_PX  # the calibration issue's bound
     assert calibration["n_poses"] == 18
     # The issue's claims, with the calibrated rig (timing is reported, not asserted).
     assert abs(sphere["radius_error_mm"]) <= TARGETS["radius_error_mm"]
