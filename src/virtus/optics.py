@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -616,13 +616,7 @@ class IsaacCameraParams:
 
     def to_dict(self) -> dict[str, float]:
         """The five parameters by name, in this object's length unit."""
-        return {
-            "focal_length": self.focal_length,
-            "horizontal_aperture": self.horizontal_aperture,
-            "vertical_aperture": self.vertical_aperture,
-            "horizontal_aperture_offset": self.horizontal_aperture_offset,
-            "vertical_aperture_offset": self.vertical_aperture_offset,
-        }
+        return asdict(self)
 
 
 def isaac_params(intrinsics: Intrinsics, pixel_size: float) -> IsaacCameraParams:

@@ -14,7 +14,7 @@ discontinuities (mixed pixels at silhouettes; :func:`virtus.reconstruct.depth_ed
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -66,14 +66,8 @@ class ScanSettings:
     """Seed of the renderer's sensor stage."""
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "spp": self.spp,
-            "lookup": self.lookup,
-            "bit_depth": self.bit_depth,
-            "use": self.use,
-            "edge_max_step": self.edge_max_step,
-            "seed": self.seed,
-        }
+        """Every setting by name (JSON-ready)."""
+        return asdict(self)
 
 
 @dataclass(frozen=True, eq=False)
