@@ -41,7 +41,7 @@ def main() -> None:
     args = parser.parse_args()
 
     from virtus.calib.episode import calibrate_rig
-    from virtus.optics import default_rig
+    from virtus.devices import default_rig
 
     machine = f"{platform.processor() or platform.machine()}, {os.cpu_count()} logical CPUs"
     with tempfile.TemporaryDirectory() as tmp:

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from virtus.capture import GT_NAMES, write_frames
-from virtus.optics import default_rig
+from virtus.devices import default_rig
 from virtus.patterns import default_sequence
 from virtus.render import Sensor, render, synthesize, trace
 from virtus.render.reference import ReferenceRenderer

@@ -14,8 +14,9 @@ from virtus.calib.board import board_from_spec
 from virtus.calib.detect import find_grid
 from virtus.calib.episode import BOARD_BLUR_M, board_scene, calibrate_rig, recalibrate
 from virtus.calib.poses import BoardPose, paper_poses
+from virtus.devices import Rig, default_rig
 from virtus.errors import VirtusError
-from virtus.optics import Pose, Rig, default_rig
+from virtus.transforms import Pose
 
 pytestmark = pytest.mark.slow
 

@@ -6,8 +6,8 @@ import pytest
 
 from virtus.calib.episode import calibrate_rig
 from virtus.cli import main
+from virtus.devices import default_rig
 from virtus.errors import InputError
-from virtus.optics import default_rig
 
 
 def test_unknown_lookup_is_refused_before_rendering(tmp_path):

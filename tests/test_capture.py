@@ -12,10 +12,10 @@ from tests.test_render_support import small_rig
 from virtus.capture import GT_NAMES, load_capture, save_capture
 from virtus.cli import main
 from virtus.errors import VirtusError
-from virtus.optics import Pose
 from virtus.patterns import default_sequence
 from virtus.render import render
 from virtus.scene import Scene, SphereObject, TexturedPlaneObject
+from virtus.transforms import Pose
 
 
 @pytest.fixture(scope="module")

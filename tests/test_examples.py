@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from virtus.optics import Camera, Rig, default_rig
+from virtus.devices import Camera, Rig, default_rig
 from virtus.patterns import default_sequence
 from virtus.render import render
 from virtus.scene import load_scene

@@ -30,7 +30,7 @@ from virtus.metrology import (
     sphere_from_4_points,
 )
 from virtus.objects import freeform_object
-from virtus.optics import Pose
+from virtus.transforms import Pose
 
 
 def _sphere_cap(rng, centre, radius, n, noise, outlier_fraction):

@@ -15,8 +15,8 @@ from tests.tolerances import (
     TURNTABLE_REFINE_SHIFT_MM,
 )
 from virtus.cli import main
+from virtus.devices import default_rig
 from virtus.errors import InputError, VirtusError
-from virtus.optics import default_rig
 from virtus.pipeline.evaluate import evaluate_scan
 from virtus.pipeline.scan import ScanSettings, load_rig_file, reconstruct_capture, scan
 from virtus.pipeline.scenes import freeform_scene

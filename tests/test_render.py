@@ -9,8 +9,9 @@ import trimesh
 
 from tests import tolerances as tol
 from tests.test_render_support import LAMBERT, plane_depth, small_rig, tilted_plane
+from virtus.devices import Camera, Projector, Rig, default_rig
 from virtus.errors import InputError
-from virtus.optics import Camera, Intrinsics, Pose, Projector, Rig, default_rig
+from virtus.optics import Intrinsics
 from virtus.patterns import default_sequence
 from virtus.render import Sensor, render, synthesize, trace
 from virtus.render.tracing import sample_offsets
@@ -23,6 +24,7 @@ from virtus.scene import (
     SphereObject,
     TexturedPlaneObject,
 )
+from virtus.transforms import Pose
 
 
 @pytest.fixture(scope="module")

@@ -16,7 +16,7 @@ from tests.test_render_support import (
     sphere_and_plane,
     tilted_plane,
 )
-from virtus.optics import default_rig
+from virtus.devices import default_rig
 from virtus.patterns import default_sequence
 from virtus.reconstruct import points_from_decoded
 from virtus.render import render, synthesize, trace

@@ -5,8 +5,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
-from virtus.optics import Camera, Intrinsics, Pose, Rig, default_rig
+from virtus.devices import Camera, Rig, default_rig
+from virtus.optics import Intrinsics
 from virtus.scene import Material, PlaneObject, Scene, SphereObject
+from virtus.transforms import Pose
 
 #: Lambertian (Mitsuba "diffuse") material used where closed forms are needed.
 LAMBERT = Material(albedo=0.8, specular=0.0)

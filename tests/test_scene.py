@@ -8,7 +8,6 @@ import trimesh
 import yaml
 
 from virtus.errors import InputError, VirtusError
-from virtus.optics import Pose
 from virtus.scene import (
     BoxObject,
     Material,
@@ -21,6 +20,7 @@ from virtus.scene import (
     load_scene,
     load_texture,
 )
+from virtus.transforms import Pose
 
 
 def write_yaml(path, data) -> str:

@@ -32,9 +32,9 @@ import numpy as np
 
 from virtus import __version__
 from virtus.checks import positive_int
+from virtus.devices import Rig
 from virtus.errors import InputError, VirtusError
 from virtus.jsonio import write_json
-from virtus.optics import Rig
 from virtus.render.groundtruth import ARRAY_NAMES
 
 #: Format tag of ``capture.json``.

@@ -32,7 +32,8 @@ from virtus.checks import as_float_array, as_points
 from virtus.errors import InputError
 
 if TYPE_CHECKING:
-    from virtus.optics import Intrinsics, Rig
+    from virtus.devices import Rig
+    from virtus.optics import Intrinsics
 
 __all__ = [
     "Use",

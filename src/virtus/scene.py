@@ -49,7 +49,7 @@ from pydantic import (
 )
 
 from virtus.errors import InputError, VirtusError
-from virtus.optics import Pose
+from virtus.transforms import Pose
 
 #: File suffixes trimesh reads for :class:`MeshObject`.
 MESH_SUFFIXES = (".stl", ".obj", ".ply")

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from virtus import paper
 from virtus.calib.board import CircleBoard, board_from_spec
 from virtus.calib.detect import find_grid, refine_centres
 from virtus.calib.io import save_json, save_opencv_yaml, save_paper_txt
@@ -35,11 +36,11 @@ from virtus.calib.projector import local_homographies
 from virtus.calib.solve import PoseObservation, StereoCalibration, calibrate_observations
 from virtus.calib.truth import truth_error
 from virtus.checks import as_rng, positive_int
+from virtus.devices import Rig
 from virtus.errors import InputError
-from virtus.optics import Rig
 
 #: The paper's reported numbers (DESIGN.md section 4), for summaries.
-PAPER_RMS_PX = {"stereo": 0.056, "projector": 0.049}
+PAPER_RMS_PX = paper.RMS_PX
 #: Gaussian softening (m, board plane) of the printed circles' edges, like slight lens
 #: defocus: with 4 spp the centroid error falls from ~0.005 px to ~0.001 px (measured on
 #: exact synthetic images); a symmetric blur leaves every circle's centroid in place.

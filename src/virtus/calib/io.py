@@ -24,9 +24,11 @@ from typing import Any
 import cv2
 import numpy as np
 
+from virtus.devices import Camera, Projector, Rig
 from virtus.errors import InputError
 from virtus.jsonio import write_json
-from virtus.optics import Camera, Intrinsics, Pose, Projector, Rig
+from virtus.optics import Intrinsics
+from virtus.transforms import Pose
 
 #: File names of the paper code's calibration text files.
 PAPER_TXT_FILES = {

@@ -32,8 +32,10 @@ import numpy as np
 
 from virtus.calib.board import CircleBoard
 from virtus.calib.projector import apply_homographies
+from virtus.devices import Camera, Projector, Rig
 from virtus.errors import VirtusError
-from virtus.optics import Camera, Intrinsics, Pose, Projector, Rig
+from virtus.optics import Intrinsics
+from virtus.transforms import Pose
 
 #: Fewest usable poses for a calibration (Zhang's method needs 3 views of a plane).
 MIN_POSES = 3

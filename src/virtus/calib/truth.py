@@ -9,7 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from virtus.optics import Intrinsics, Rig
+from virtus.devices import Rig
+from virtus.optics import Intrinsics
 
 
 def _device_error(estimated: Intrinsics, true: Intrinsics) -> dict[str, Any]:

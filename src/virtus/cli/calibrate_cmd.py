@@ -35,7 +35,7 @@ def register(app: typer.Typer) -> None:
         from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
         from virtus.calib.episode import calibrate_rig
-        from virtus.optics import Rig, default_rig
+        from virtus.devices import Rig, default_rig
 
         true_rig = Rig.load_json(rig) if rig is not None else default_rig()
         console = Console()

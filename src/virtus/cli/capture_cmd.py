@@ -37,7 +37,7 @@ def register(app: typer.Typer) -> None:
         """Render the paper's 52-frame sequence for one pose; write OUT/frames/000.png ...,
         OUT/capture.json (rig, patterns, scene, settings) and OUT/gt/*.npy ground truth."""
         from virtus.capture import save_capture
-        from virtus.optics import Rig, default_rig
+        from virtus.devices import Rig, default_rig
         from virtus.patterns import default_sequence
         from virtus.render import render
         from virtus.scene import default_scene, load_scene

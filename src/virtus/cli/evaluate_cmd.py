@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 #: The paper's virtual C2M mean absolute error (astronaut figurine), mm.
-PAPER_C2M_MAE_MM = 0.37
+from virtus.paper import C2M_MAE_MM as PAPER_C2M_MAE_MM
 
 
 def register(app: typer.Typer) -> None:

@@ -9,7 +9,7 @@ from typing import Annotated, Any
 import typer
 
 #: The paper's camera sensor: 20.9995 mm aperture over 960 px.
-PAPER_PIXEL_SIZE_MM = 20.9995 / 960
+from virtus.paper import CAMERA_PIXEL_SIZE_MM as PAPER_PIXEL_SIZE_MM
 
 
 def register(app: typer.Typer) -> None:
@@ -27,7 +27,7 @@ def register(app: typer.Typer) -> None:
         ] = PAPER_PIXEL_SIZE_MM,
     ) -> None:
         """Print the rig (DESIGN schema), Isaac Sim camera parameters and projected size."""
-        from virtus.optics import Rig, default_rig, rig_info
+        from virtus.devices import Rig, default_rig, rig_info
 
         the_rig = Rig.load_json(rig) if rig is not None else default_rig()
         data = rig_info(the_rig, pixel_size_mm)

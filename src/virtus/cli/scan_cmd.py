@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from virtus.cli.options import LOOKUP_HELP, Lookup
+from virtus.paper import C2M_MAE_MM
 
 
 def register(app: typer.Typer) -> None:
@@ -52,7 +53,7 @@ def register(app: typer.Typer) -> None:
         from rich.console import Console
         from rich.table import Table
 
-        from virtus.optics import Rig
+        from virtus.devices import Rig
         from virtus.pipeline.scan import ScanSettings
         from virtus.pipeline.scan import scan as run_scan
         from virtus.pipeline.scenes import resolve_scene
@@ -114,7 +115,7 @@ def _turntable(console, scene, out, n_views, rig, calibration, settings, refine,
     table = Table(title=f"turntable scan, {n_views} views -> {result.ply_path}", show_header=False)
     table.add_row("points per view", ", ".join(map(str, result.view_counts)))
     table.add_row("merged points", str(result.merged.shape[0]))
-    table.add_row("C2M MAE", f"{s['mae_mm']:.4f} mm (paper, one view: 0.37 mm)")
+    table.add_row("C2M MAE", f"{s['mae_mm']:.4f} mm (paper, one view: {C2M_MAE_MM} mm)")
     table.add_row("C2M RMSE", f"{s['rmse_mm']:.4f} mm")
     table.add_row("C2M p95 |d|", f"{s['p95_abs_mm']:.4f} mm")
     table.add_row(

@@ -19,7 +19,7 @@ from virtus.errors import InputError
 from virtus.metrology.icp import IcpResult, icp_to_mesh
 from virtus.metrology.proximity import MeshIndex
 from virtus.metrology.stats import ErrorStats, error_stats
-from virtus.optics import Pose
+from virtus.transforms import Pose
 
 __all__ = ["C2MResult", "cloud_to_mesh"]
 

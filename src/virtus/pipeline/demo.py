@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from virtus import paper
 from virtus.errors import VirtusError
 from virtus.jsonio import write_json
 from virtus.metrology import SphereFit, fit_sphere
@@ -30,15 +31,8 @@ from virtus.pipeline.scan import Reconstruction, ScanSettings, reconstruct, scan
 
 __all__ = ["PAPER", "DemoConfig", "DemoResult", "run_demo", "sphere_roi_fit"]
 
-#: The paper's reported numbers (DESIGN.md section 4).
-PAPER = {
-    "camera_rms_px": None,
-    "projector_rms_px": 0.049,
-    "stereo_rms_px": 0.056,
-    "radius_mm": 99.339,
-    "radius_error_mm": 0.661,
-    "inlier_ratio": 0.986,
-}
+#: The paper's reported numbers.
+PAPER = paper.DEMO
 #: What the demo promises (issue "End to end").
 TARGETS = {"radius_error_mm": 0.05, "inlier_ratio": 0.98, "total_s": 120.0}
 
@@ -139,7 +133,7 @@ def run_demo(
     :class:`DemoResult`; ``DIR/metrics.json``, ``DIR/calibration.json``, ``DIR/scan/`` written.
     """
     from virtus.calib.episode import calibrate_rig
-    from virtus.optics import default_rig
+    from virtus.devices import default_rig
     from virtus.scene import SphereObject, default_scene
 
     config = config or DemoConfig()

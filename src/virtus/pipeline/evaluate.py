@@ -20,9 +20,9 @@ from virtus.checks import as_points, positive
 from virtus.errors import VirtusError
 from virtus.jsonio import write_json
 from virtus.metrology import C2MResult, cloud_to_mesh
-from virtus.optics import Pose
 from virtus.pipeline import layout
 from virtus.ply import read_ply
+from virtus.transforms import Pose
 
 __all__ = ["MeshEvaluation", "evaluate_points", "evaluate_scan", "scene_meshes"]
 

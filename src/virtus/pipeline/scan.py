@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from virtus.devices import Rig
 from virtus.errors import InputError, VirtusError
-from virtus.optics import Rig
 from virtus.pipeline import layout
 from virtus.ply import write_ply
 from virtus.reconstruct import (
@@ -311,7 +311,7 @@ def scan(
     import time
 
     from virtus.capture import save_capture
-    from virtus.optics import default_rig
+    from virtus.devices import default_rig
     from virtus.patterns import default_sequence
     from virtus.render import render
 

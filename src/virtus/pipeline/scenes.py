@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from virtus.errors import InputError
-from virtus.optics import Pose
+from virtus.transforms import Pose
 
 __all__ = [
     "BUILTIN_SCENES",

@@ -23,13 +23,14 @@ from typing import Any
 import numpy as np
 
 from virtus.checks import positive_int
+from virtus.devices import Rig
 from virtus.errors import VirtusError
 from virtus.jsonio import write_json
 from virtus.metrology import C2MResult, MeshIndex, cloud_to_mesh, icp_to_mesh
-from virtus.optics import Pose, Rig
 from virtus.pipeline.scan import ScanSettings, scan
 from virtus.pipeline.scenes import FREEFORM_CENTRE_M
 from virtus.ply import write_ply
+from virtus.transforms import Pose
 
 __all__ = ["TurntableResult", "turntable_poses", "turntable_scan"]
 

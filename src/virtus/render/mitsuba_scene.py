@@ -13,7 +13,6 @@ from typing import Any
 import numpy as np
 
 from virtus.errors import InputError
-from virtus.optics import Pose
 from virtus.scene import (
     BoxObject,
     Material,
@@ -23,6 +22,7 @@ from virtus.scene import (
     SphereObject,
     TexturedPlaneObject,
 )
+from virtus.transforms import Pose
 
 
 def _texture(mi: ModuleType, image: np.ndarray) -> dict[str, Any]:

@@ -8,14 +8,15 @@ from typing import Any, Literal
 import numpy as np
 
 from virtus.checks import as_rng
+from virtus.devices import Rig
 from virtus.errors import InputError
-from virtus.optics import Pose, Rig
 from virtus.render.groundtruth import GroundTruth
 from virtus.render.sensor import Sensor
 from virtus.render.synthesis import synthesize
 from virtus.render.synthesis_jit import synthesize_digital
 from virtus.render.tracing import trace
 from virtus.scene import Scene
+from virtus.transforms import Pose
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,7 +72,7 @@ def render(
 
     Parameters
     ----------
-    rig : camera, projector and ``proj2cam`` (virtus.optics).
+    rig : camera, projector and ``proj2cam`` (virtus.devices).
     scene : the scene (virtus.scene); world frame = camera frame unless ``cam2world``.
     sequence : pattern sequence (virtus.patterns) with ``frames`` and ``profile(i)``.
     spp : supersamples per pixel, a perfect square (stratified grid centred on the pixel).

@@ -22,12 +22,14 @@ from typing import Any
 import numpy as np
 
 from virtus.checks import positive_int
+from virtus.devices import Rig
 from virtus.errors import InputError
-from virtus.optics import Intrinsics, Pose, Rig
+from virtus.optics import Intrinsics
 from virtus.render.backend import mitsuba
 from virtus.render.mitsuba_scene import scene_dict
 from virtus.render.synthesis import LOOKUPS
 from virtus.scene import Scene
+from virtus.transforms import Pose
 
 #: Principal points and focal lengths must match Mitsuba's ideal frustum this closely (px).
 _CENTRE_TOL_PX = 1e-9

@@ -36,12 +36,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from virtus.checks import positive_int
+from virtus.devices import Rig
 from virtus.errors import InputError
-from virtus.optics import Intrinsics, Pose, Rig
+from virtus.optics import Intrinsics
 from virtus.render.backend import mitsuba
 from virtus.render.groundtruth import GroundTruth
 from virtus.render.mitsuba_scene import check_in_front, scene_dict
 from virtus.scene import Scene
+from virtus.transforms import Pose
 
 #: Rays traced per Mitsuba call: bounds memory (~100 B per ray inside Dr.Jit).
 _RAYS_PER_CHUNK = 1 << 23
@@ -243,7 +245,7 @@ def trace(
     variant : Mitsuba variant (default: automatic, see :mod:`virtus.render.backend`).
     """
     if not isinstance(rig, Rig):
-        raise InputError("rig", "a virtus.optics.Rig", type(rig).__name__)
+        raise InputError("rig", "a virtus.devices.Rig", type(rig).__name__)
     if not isinstance(scene, Scene):
         raise InputError("scene", "a virtus.scene.Scene", type(scene).__name__)
     cam2world = Pose.identity() if cam2world is None else cam2world
