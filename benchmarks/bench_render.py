@@ -26,7 +26,8 @@ import numpy as np
 from virtus.capture import GT_NAMES, write_frames
 from virtus.devices import default_rig
 from virtus.patterns import default_sequence
-from virtus.render import Sensor, render, synthesize, trace
+from virtus.render import render, synthesize, trace
+from virtus.sensor import Sensor
 from virtus.render.reference import ReferenceRenderer
 from virtus.render.synthesis_jit import synthesize_digital
 from virtus.scene import default_scene

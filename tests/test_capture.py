@@ -3,19 +3,23 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 
 from tests.test_render_support import small_rig
-from virtus.capture import GT_NAMES, load_capture, save_capture
+from virtus.capture import CAPTURE_FORMAT, Capture
 from virtus.cli import main
 from virtus.errors import VirtusError
 from virtus.patterns import default_sequence
-from virtus.render import render
+from virtus.scanner import Scanner
 from virtus.scene import Scene, SphereObject, TexturedPlaneObject
+from virtus.sensor import Sensor
 from virtus.transforms import Pose
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
@@ -23,44 +27,89 @@ def captured():
     rig, sequence = small_rig(), default_sequence()
     board = TexturedPlaneObject((0.2, 0.1), np.eye(4) * 0.5 + 0.25, Pose(np.eye(3), (0, 0, 1.2)))
     scene = Scene([SphereObject(0.05, (0, 0, 1.0)), board])
-    return rig, sequence, scene, render(rig, scene, sequence, bit_depth=16)
+    scanner = Scanner(rig=rig, sequence=sequence, sensor=Sensor(bit_depth=16, read_noise_dn=3.0))
+    return scanner, scene, scanner.capture(scene, rng=7, command=["test"])
 
 
 def test_capture_round_trip(tmp_path, captured) -> None:
-    rig, sequence, scene, rendering = captured
-    manifest = save_capture(tmp_path / "cap", rendering, rig=rig, sequence=sequence, scene=scene)
+    scanner, scene, capture = captured
+    manifest = capture.save(tmp_path / "cap")
     data = json.loads(manifest.read_text())
-    assert data["rig"] == rig.to_dict() and data["units"]["length"] == "m"
-    assert data["render"]["spp"] == 4 and data["render"]["bit_depth"] == 16
+    assert data["format"] == CAPTURE_FORMAT
+    assert data["rig"] == scanner.rig.to_dict() and data["units"]["length"] == "m"
+    assert data["render"]["spp"] == 4 and data["bit_depth"] == 16 and data["seed"] == 7
     assert data["frames"]["files"][:2] == ["frames/000.png", "frames/001.png"]
+    assert data["provenance"]["source"] == "rendered" and data["provenance"]["command"] == ["test"]
 
-    loaded = load_capture(tmp_path / "cap")
-    np.testing.assert_array_equal(loaded.frames, rendering.frames)
+    loaded = Capture.load(tmp_path / "cap")
+    assert loaded == capture  # frames, rig, pose, bit depth, sensor, sequence, seed
     assert loaded.frames.dtype == np.uint16
-    assert loaded.rig.to_dict() == rig.to_dict()
-    assert loaded.sequence == sequence
+    assert loaded.sensor == scanner.sensor and loaded.seed == 7
     np.testing.assert_array_equal(
         loaded.scene.objects[1].texture_image(), scene.objects[1].texture_image()
     )
-    assert set(loaded.gt) == set(GT_NAMES)
-    for name, array in rendering.gt.arrays().items():
-        np.testing.assert_array_equal(loaded.gt[name], array)
-    np.testing.assert_array_equal(loaded.ground_truth.mask, rendering.gt.mask)
-    assert loaded.metadata["render"]["exposure_dn_per_radiance"] == rendering.exposure
+    for name, array in capture.ground_truth.arrays().items():
+        np.testing.assert_array_equal(loaded.ground_truth.arrays()[name], array)
+    assert loaded.render["exposure_dn_per_radiance"] == capture.render["exposure_dn_per_radiance"]
+    # A different seed is a different capture.
+    assert scanner.capture(scene, rng=8) != capture
 
     # The directory can be moved: paths inside capture.json are relative.
     (tmp_path / "cap").rename(tmp_path / "moved")
-    moved = load_capture(tmp_path / "moved", load_gt=False)
-    assert moved.gt == {} and moved.scene is not None
+    moved = Capture.load(tmp_path / "moved")
+    assert moved.scene is not None and moved.has_ground_truth and moved == capture
+
+
+def test_capture_json_follows_its_schema(tmp_path, captured) -> None:
+    jsonschema = pytest.importorskip("jsonschema")
+    schema = json.loads((REPO / "schemas" / "capture.schema.json").read_text())
+    jsonschema.Draft202012Validator.check_schema(schema)
+    data = json.loads(captured[2].save(tmp_path / "cap").read_text())
+    jsonschema.validate(data, schema)
+    data["format"] = "virtus.capture/9"
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(data, schema)
+
+
+def test_cam2world_is_recorded(tmp_path, captured) -> None:
+    scanner = captured[0]
+    cam2world = Pose.from_euler("y", [10.0], (0.05, 0.0, 0.0))
+    centre = cam2world.apply(np.array([[0.0, 0.0, 1.0]]))[0]
+    capture = scanner.capture(Scene([SphereObject(0.05, tuple(centre))]), cam2world=cam2world)
+    assert capture.ground_truth.mask.any()
+    loaded = Capture.load(capture.save(tmp_path / "c").parent)
+    assert loaded.cam2world == cam2world and loaded == capture
 
 
 def test_existing_capture_needs_overwrite(tmp_path, captured) -> None:
-    rig, sequence, scene, rendering = captured
-    save_capture(tmp_path, rendering, rig=rig, sequence=sequence)
+    capture = captured[2]
+    capture.save(tmp_path)
     with pytest.raises(VirtusError, match="already holds a capture"):
-        save_capture(tmp_path, rendering, rig=rig, sequence=sequence)
-    save_capture(tmp_path, rendering, rig=rig, sequence=sequence, overwrite=True)
-    assert load_capture(tmp_path).scene is None
+        capture.save(tmp_path)
+    capture.save(tmp_path, overwrite=True)
+    assert Capture.load(tmp_path) == capture
+
+
+def test_reading_a_capture_never_loads_the_renderer(tmp_path, captured) -> None:
+    # DESIGN rule: decoding and reconstructing a capture need neither virtus.render nor
+    # Mitsuba; checked in a fresh interpreter.
+    import subprocess
+    import sys
+
+    directory = tmp_path / "cap"
+    captured[2].save(directory)
+    code = (
+        "import sys\n"
+        "from virtus.pipeline.scan import decode_capture, reconstruct_capture\n"
+        f"decode_capture({str(directory)!r})\n"
+        f"reconstruct_capture({str(directory)!r})\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('mitsuba', 'drjit')\n"
+        "             or m.startswith('virtus.render')))"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "[]"
+    assert (directory / "points.ply").is_file()
 
 
 def run_cli(args: list[str], capsys) -> tuple[int, str, str]:
@@ -81,8 +130,8 @@ def test_cli_capture_writes_the_layout(tmp_path, capsys) -> None:
     assert len(list((out / "frames").glob("*.png"))) == 52
     for name in ("depth", "points", "normals", "proj_uv", "mask"):
         assert (out / "gt" / f"{name}.npy").is_file()
-    loaded = load_capture(out)
-    assert loaded.metadata["render"]["lookup"] == "bilinear"
+    loaded = Capture.load(out)
+    assert loaded.render["lookup"] == "bilinear"
     assert loaded.scene.objects[0].radius_m == 0.1  # the default scene
 
 
@@ -117,24 +166,10 @@ def test_cli_capture_missing_scene_file(tmp_path, capsys) -> None:
     assert len(stderr.strip().splitlines()) == 1
 
 
-def test_capture_module_does_not_load_mitsuba():
-    # DESIGN rule: only virtus.render knows Mitsuba exists, and only when it renders.
-    import subprocess
-    import sys
-
-    code = (
-        "import sys, virtus.capture; "
-        "print(sorted({m.split('.')[0] for m in sys.modules} & {'mitsuba', 'drjit'}))"
-    )
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
-    assert result.returncode == 0, result.stderr
-    assert result.stdout.strip() == "[]"
-
-
 @pytest.mark.parametrize("workers", [0, -1, 2.5])
 def test_frame_writer_refuses_a_bad_thread_count(tmp_path, workers):
-    from virtus.capture import write_frames
     from virtus.errors import InputError
+    from virtus.images import write_frames
 
     with pytest.raises(InputError, match=r"^workers: expected an integer >= 1"):
         write_frames(tmp_path, np.zeros((1, 4, 4), np.uint8), workers=workers)

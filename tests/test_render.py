@@ -13,7 +13,8 @@ from virtus.devices import Camera, Projector, Rig, default_rig
 from virtus.errors import InputError
 from virtus.optics import Intrinsics
 from virtus.patterns import default_sequence
-from virtus.render import Sensor, render, synthesize, trace
+from virtus.render import render, synthesize, trace
+from virtus.sensor import Sensor
 from virtus.render.tracing import sample_offsets
 from virtus.scene import (
     BoxObject,

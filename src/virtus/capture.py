@@ -1,11 +1,19 @@
-"""Capture directories: the frames of one pose, the rig, the patterns, the scene, ground truth.
+"""The capture: the frames of one pose and everything needed to decode and triangulate them.
 
-Layout (all lengths in metres, camera frame; projector coordinates in projector pixels)::
+A :class:`Capture` is the project's one seam: the renderer makes them
+(:meth:`virtus.scanner.Scanner.capture`), :func:`import_capture` makes them from a real
+bench's images, and everything downstream (decoding, reconstruction, calibration,
+evaluation) only reads them. This module never imports the renderer.
 
-    DIR/capture.json        format, units, rig (DESIGN.md rig schema), pattern sequence
-                            (PatternSequence.to_dict), scene, render settings (spp, lookup,
-                            exposure, bit depth, Mitsuba variant), frame files, gt files
+On-disk layout, format ``virtus.capture/2`` (JSON Schema: ``schemas/capture.schema.json``;
+lengths in metres, camera frame; projector coordinates in projector pixels)::
+
+    DIR/capture.json        format, units, rig (rig schema), cam2world, sequence
+                            (PatternSequence.to_dict), sensor, seed, bit depth, render
+                            settings (rendered captures), scene, frame files, gt files,
+                            provenance (virtus version, command, source)
     DIR/frames/000.png ...  one 8- or 16-bit grey PNG per frame, in sequence order
+                            (10- and 12-bit frames are stored in 16-bit PNGs, unscaled)
     DIR/gt/depth.npy        (H, W) float64, z along the camera axis; NaN where no surface
     DIR/gt/points.npy       (H, W, 3) float64, camera frame; NaN where no surface
     DIR/gt/normals.npy      (H, W, 3) float64 unit normals toward the camera
@@ -14,16 +22,15 @@ Layout (all lengths in metres, camera frame; projector coordinates in projector 
     DIR/gt/mask_hit.npy, mask_shadow.npy, mask_outside.npy   (H, W) bool
     DIR/scene_assets/       in-memory textures of the scene, as .npy (if any)
 
-PNG encoding dominates the cost of writing; frames are written with OpenCV at a low
-compression level on a thread pool (OpenCV releases the GIL while encoding).
+Format ``virtus.capture/1`` (virtus 0.1) is read too: it has no ``cam2world`` (identity),
+no sensor and no seed.
 """
 
 from __future__ import annotations
 
-import json
-import os
+import functools
 import shutil
-from concurrent.futures import ThreadPoolExecutor
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -31,18 +38,22 @@ from typing import Any
 import numpy as np
 
 from virtus import __version__
-from virtus.checks import positive_int
 from virtus.devices import Rig
 from virtus.errors import InputError, VirtusError
+from virtus.groundtruth import ARRAY_NAMES, GroundTruth
+from virtus.images import list_images, read_images, write_frames
 from virtus.jsonio import write_json
-from virtus.render.groundtruth import ARRAY_NAMES
+from virtus.patterns import DecodeResult, PatternSequence
+from virtus.safeio import load_npy, read_json
+from virtus.sensor import BIT_DEPTHS, Sensor
+from virtus.transforms import Pose
 
-#: Format tag of ``capture.json``.
-CAPTURE_FORMAT = "virtus.capture/1"
-#: Ground-truth arrays written to ``gt/`` (``mask`` = hit & lit & inside): the names of
-#: :meth:`virtus.render.GroundTruth.arrays` (importing virtus.render loads neither Mitsuba
-#: nor Dr.Jit: render.backend imports them when a variant is chosen).
-GT_NAMES = ARRAY_NAMES
+#: Format tag written to ``capture.json``.
+CAPTURE_FORMAT = "virtus.capture/2"
+#: Format tags read.
+READABLE_FORMATS = ("virtus.capture/1", CAPTURE_FORMAT)
+#: The capture's manifest file.
+MANIFEST = "capture.json"
 #: Units recorded in ``capture.json``.
 UNITS = {
     "length": "m",
@@ -51,219 +62,373 @@ UNITS = {
     "phase": "rad",
     "frames": "digital numbers",
 }
+#: Keys of ``capture.json`` (format 2); others are refused.
+_KEYS = (
+    "format", "virtus_version", "units", "rig", "cam2world", "sequence", "sensor", "seed",
+    "bit_depth", "render", "scene", "frames", "gt", "provenance", "extra",
+)  # fmt: skip
+#: Sub-folders a capture owns (removed when it is overwritten).
+_OWNED = ("frames", "gt", "scene_assets")
+
+
+def bit_depth_of(frames: np.ndarray) -> int:
+    """The smallest ADC bit depth (8, 10, 12, 16) that holds ``frames`` (uint8 -> 8)."""
+    if frames.dtype == np.uint8:
+        return 8
+    if frames.dtype != np.uint16:
+        raise InputError("frames", "uint8 or uint16 digital numbers", frames.dtype)
+    peak = int(frames.max()) if frames.size else 0
+    return next(bits for bits in BIT_DEPTHS[1:] if peak < 1 << bits)
+
+
+def _provenance(source: str, command: list[str] | None) -> dict[str, Any]:
+    # No time stamp: the same command and seed must give byte-identical files.
+    return {
+        "virtus_version": __version__,
+        "source": source,
+        "command": list(sys.argv) if command is None else list(command),
+    }
 
 
 @dataclass(frozen=True, eq=False)
 class Capture:
-    """A capture directory read back by :func:`load_capture`.
+    """The frames of one pose of a camera-projector rig, and how to read them.
 
     Attributes
     ----------
-    frames : (F, H, W) uint8 or uint16 frames in sequence order.
-    rig : the rig that rendered them (camera frame = world frame of the capture).
-    sequence : the pattern sequence (``virtus.patterns.PatternSequence``).
-    scene : the scene (``virtus.scene.Scene``) or None when the file holds none.
-    gt : ground-truth arrays by name (see :data:`GT_NAMES`); empty if not loaded/present.
-    metadata : the rest of ``capture.json`` (units, render settings, versions).
-    path : the directory.
+    sequence : the projected pattern sequence (frame ``i`` of ``frames`` shows frame ``i``).
+    rig : the rig that took the frames (for a rendered capture: the true rig).
+    frames : (F, H, W) uint8 or uint16 digital numbers in sequence order; read from disk on
+        first access for a loaded capture.
+    cam2world : pose of the camera in the scene's world frame (identity when unknown).
+    bit_depth : ADC bits of the digital numbers (8, 10, 12 or 16); full scale
+        ``2**bit_depth - 1``.
+    sensor : the camera model that rendered the frames; None for imported captures.
+    seed : seed of the sensor's noise streams; None for imported captures.
+    scene : the rendered scene (``virtus.scene.Scene``), if known.
+    render : how the frames were rendered (spp, projector pixel model, exposure, variant);
+        empty for imported captures.
+    provenance : virtus version, source (``"rendered"`` or ``"imported"``), command line.
+    path : the directory it was loaded from or saved to, if any.
     """
 
-    frames: np.ndarray
+    sequence: PatternSequence
     rig: Rig
-    sequence: Any
-    scene: Any
-    gt: dict[str, np.ndarray] = field(default_factory=dict)
-    metadata: dict[str, Any] = field(default_factory=dict)
+    frame_data: np.ndarray | None = field(default=None, repr=False)
+    cam2world: Pose = field(default_factory=Pose.identity)
+    bit_depth: int | None = None
+    sensor: Sensor | None = None
+    seed: int | None = None
+    scene: Any = None
+    gt_data: GroundTruth | None = field(default=None, repr=False)
+    render: dict[str, Any] = field(default_factory=dict)
+    provenance: dict[str, Any] = field(default_factory=dict)
     path: Path | None = None
+    frame_files: tuple[Path, ...] = field(default=(), repr=False)
+    gt_files: dict[str, Path] = field(default_factory=dict, repr=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.sequence, PatternSequence):
+            raise InputError("sequence", "a PatternSequence", type(self.sequence).__name__)
+        if not isinstance(self.rig, Rig):
+            raise InputError("rig", "a Rig", type(self.rig).__name__)
+        if self.frame_data is None and not self.frame_files:
+            raise InputError("frames", "frames or frame files", None)
+        count = len(self.frame_files) if self.frame_data is None else len(self.frame_data)
+        if count != len(self.sequence):
+            raise InputError(
+                "frames", f"{len(self.sequence)} frames (one per sequence frame)", count
+            )
+        if self.frame_data is not None:
+            self._check_frames(self.frame_data)
+            if self.bit_depth is None:
+                object.__setattr__(self, "bit_depth", bit_depth_of(self.frame_data))
+        if self.bit_depth not in BIT_DEPTHS:
+            raise InputError("bit_depth", f"one of {BIT_DEPTHS}", self.bit_depth)
+
+    def _check_frames(self, frames: np.ndarray) -> None:
+        if frames.ndim != 3 or frames.dtype not in (np.uint8, np.uint16):
+            raise InputError(
+                "frames",
+                "(F, H, W) uint8 or uint16 digital numbers",
+                f"{frames.dtype} {frames.shape}",
+            )
+        cam = self.rig.camera.intrinsics
+        if frames.shape[1:] != (cam.height, cam.width):
+            raise InputError(
+                "frames",
+                f"{cam.width}x{cam.height} px images (the rig's camera)",
+                f"{frames.shape[2]}x{frames.shape[1]} px",
+            )
+
+    # --- data ---------------------------------------------------------------------------
+
+    @functools.cached_property
+    def frames(self) -> np.ndarray:
+        """(F, H, W) uint8 or uint16 frames in sequence order (read on first access)."""
+        if self.frame_data is not None:
+            return self.frame_data
+        frames = read_images(self.frame_files)
+        self._check_frames(frames)
+        if self.bit_depth is not None and int(frames.max()) > (1 << self.bit_depth) - 1:
+            raise InputError("frames", f"values <= {(1 << self.bit_depth) - 1}", int(frames.max()))
+        return frames
 
     @property
-    def ground_truth(self) -> Any:
-        """The ground truth as a :class:`virtus.render.GroundTruth` (phase(), mask)."""
-        from virtus.render.groundtruth import GroundTruth
+    def full_scale(self) -> int:
+        """Largest digital number of the frames, ``2**bit_depth - 1``."""
+        return (1 << int(self.bit_depth)) - 1  # type: ignore[arg-type]
 
-        if not self.gt:
-            raise VirtusError(f"{self.path}: this capture has no ground truth (gt/)")
-        return GroundTruth.from_arrays(self.gt)
+    @property
+    def has_ground_truth(self) -> bool:
+        """True when the capture carries ground truth (rendered captures)."""
+        return self.gt_data is not None or bool(self.gt_files)
 
+    @functools.cached_property
+    def ground_truth(self) -> GroundTruth:
+        """Exact per-pixel geometry (:class:`virtus.groundtruth.GroundTruth`), read on first
+        access; :class:`VirtusError` for a capture without ground truth."""
+        if self.gt_data is not None:
+            return self.gt_data
+        if not self.gt_files:
+            raise VirtusError(f"{self.path or 'capture'}: this capture has no ground truth")
+        arrays = {
+            name: load_npy(path, f"ground truth {name}") for name, path in self.gt_files.items()
+        }
+        return GroundTruth.from_arrays(arrays)
 
-def _frame_name(index: int) -> str:
-    return f"{index:03d}.png"
+    def decode(self, **options: Any) -> DecodeResult:
+        """Decode the frames (``PatternSequence.decode``) at this capture's full scale;
+        ``options``: ``min_modulation``, ``saturation_level``, ... of that method."""
+        return self.sequence.decode(self.frames, full_scale=self.full_scale, **options)
 
-
-def _pool_size(workers: int | None) -> int:
-    """Threads for PNG encoding/decoding: ``workers`` (>= 1), or the number of CPUs."""
-    if workers is None:
-        return os.cpu_count() or 1
-    return positive_int("workers", workers)
-
-
-def write_frames(
-    directory: str | Path,
-    frames: np.ndarray,
-    *,
-    compression: int = 1,
-    workers: int | None = None,
-) -> list[Path]:
-    """Write (F, H, W) uint8/uint16 frames as ``000.png ...`` into ``directory``.
-
-    Parameters
-    ----------
-    compression : PNG (zlib) level 0-9; 1 is several times faster than OpenCV's default 3
-        for a few percent larger files.
-    workers : encoding threads (default: the number of CPUs).
-    """
-    import cv2
-
-    frames = np.asarray(frames)
-    if frames.ndim != 3 or frames.dtype not in (np.uint8, np.uint16):
-        raise InputError(
-            "frames", "a (F, H, W) uint8 or uint16 array", f"{frames.dtype} {frames.shape}"
+    def __eq__(self, other: object) -> bool:
+        """Equal frames, rig, pose, bit depth, sensor, sequence and seed."""
+        if not isinstance(other, Capture):
+            return NotImplemented
+        return (
+            self.sequence == other.sequence
+            and self.rig.to_dict() == other.rig.to_dict()
+            and self.cam2world == other.cam2world
+            and self.bit_depth == other.bit_depth
+            and self.sensor == other.sensor
+            and self.seed == other.seed
+            and np.array_equal(self.frames, other.frames)
+            and self.frames.dtype == other.frames.dtype
         )
-    if not 0 <= compression <= 9:
-        raise InputError("compression", "a PNG compression level 0-9", compression)
-    threads = _pool_size(workers)
-    directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
-    paths = [directory / _frame_name(i) for i in range(len(frames))]
-    params = [cv2.IMWRITE_PNG_COMPRESSION, int(compression)]
 
-    def write(index: int) -> None:
-        if not cv2.imwrite(str(paths[index]), frames[index], params):
-            raise OSError(f"could not write {paths[index]}")
+    __hash__ = None  # type: ignore[assignment]
 
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        list(pool.map(write, range(len(frames))))
-    return paths
+    # --- files --------------------------------------------------------------------------
 
+    def to_dict(self, directory: Path, frame_files: list[Path]) -> dict[str, Any]:
+        """The ``capture.json`` content for this capture saved in ``directory``."""
+        scene = None
+        if self.scene is not None:
+            scene = self.scene.to_dict(asset_dir=directory / "scene_assets", relative_to=directory)
+        frames = self.frames
+        data = {
+            "format": CAPTURE_FORMAT,
+            "virtus_version": __version__,
+            "units": UNITS,
+            "rig": self.rig.to_dict(),
+            "cam2world": self.cam2world.to_dict(),
+            "sequence": self.sequence.to_dict(),
+            "sensor": None if self.sensor is None else self.sensor.to_dict(),
+            "seed": self.seed,
+            "bit_depth": self.bit_depth,
+            "render": self.render or None,
+            "scene": scene,
+            "frames": {
+                "count": int(frames.shape[0]),
+                "height": int(frames.shape[1]),
+                "width": int(frames.shape[2]),
+                "dtype": str(frames.dtype),
+                "files": [path.relative_to(directory).as_posix() for path in frame_files],
+            },
+            "gt": (
+                {name: f"gt/{name}.npy" for name in ARRAY_NAMES} if self.has_ground_truth else None
+            ),
+            "provenance": self.provenance,
+        }
+        return data
 
-def read_frames(paths: list[Path], workers: int | None = None) -> np.ndarray:
-    """Read grey PNG frames (unchanged bit depth) into a (F, H, W) array; ``workers``: decoding
-    threads (default: the number of CPUs)."""
-    import cv2
+    def save(
+        self,
+        directory: str | Path,
+        *,
+        overwrite: bool = False,
+        compression: int = 1,
+        workers: int | None = None,
+    ) -> Path:
+        """Write the capture (layout in the module docstring); returns ``capture.json``.
 
-    def read(path: Path) -> np.ndarray:
-        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-        if image is None:
-            raise InputError("frame", "a readable PNG file", str(path))
-        if image.ndim != 2:
-            raise InputError(str(path), "a single-channel (grey) image", f"shape {image.shape}")
-        return image
-
-    with ThreadPoolExecutor(max_workers=_pool_size(workers)) as pool:
-        images = list(pool.map(read, paths))
-    shapes = {(image.shape, image.dtype) for image in images}
-    if len(shapes) != 1:
-        raise InputError("frames", "frames of one size and dtype", sorted(map(str, shapes)))
-    return np.stack(images)
-
-
-def save_capture(
-    directory: str | Path,
-    rendering: Any,
-    *,
-    rig: Rig,
-    sequence: Any,
-    scene: Any = None,
-    overwrite: bool = False,
-    compression: int = 1,
-    workers: int | None = None,
-    extra: dict[str, Any] | None = None,
-) -> Path:
-    """Write a capture directory (see the module docstring for the layout).
-
-    Parameters
-    ----------
-    directory : target directory (created).
-    rendering : a :class:`virtus.render.Rendering` (frames, gt and render settings).
-    rig, sequence, scene : what was rendered; ``scene`` may be None.
-    overwrite : replace an existing capture in ``directory`` (its frames/ and gt/ files are
-        removed first); otherwise an existing ``capture.json`` raises :class:`VirtusError`.
-    compression, workers : PNG settings, see :func:`write_frames`.
-    extra : more JSON-ready metadata stored under ``"extra"``.
-
-    Returns
-    -------
-    The path of ``capture.json``.
-    """
-    directory = Path(directory)
-    manifest = directory / "capture.json"
-    if manifest.exists():
-        if not overwrite:
-            raise VirtusError(
-                f"{directory} already holds a capture "
-                "(pass overwrite=True, or --overwrite on the command line)"
-            )
-        for sub in ("frames", "gt", "scene_assets"):
+        An existing capture in ``directory`` raises :class:`VirtusError` unless
+        ``overwrite``, which removes its frames, ground truth and assets first.
+        ``compression``, ``workers``: PNG settings (:func:`virtus.images.write_frames`).
+        """
+        directory = Path(directory)
+        manifest = directory / MANIFEST
+        if manifest.exists():
+            if not overwrite:
+                raise VirtusError(
+                    f"{directory} already holds a capture "
+                    "(pass overwrite=True, or --overwrite on the command line)"
+                )
+            manifest.unlink()
+        for sub in _OWNED:
             shutil.rmtree(directory / sub, ignore_errors=True)
-    directory.mkdir(parents=True, exist_ok=True)
-    frames = rendering.frames
-    paths = write_frames(directory / "frames", frames, compression=compression, workers=workers)
-    gt_dir = directory / "gt"
-    gt_dir.mkdir(exist_ok=True)
-    arrays = rendering.gt.arrays()
-    for name in GT_NAMES:
-        np.save(gt_dir / f"{name}.npy", arrays[name])
-    scene_data = None
-    if scene is not None:
-        scene_data = scene.to_dict(asset_dir=directory / "scene_assets", relative_to=directory)
-    data = {
-        "format": CAPTURE_FORMAT,
-        "virtus_version": __version__,
-        "units": UNITS,
-        "rig": rig.to_dict(),
-        "sequence": sequence.to_dict(),
-        "scene": scene_data,
-        "render": rendering.metadata(),
-        "frames": {
-            "count": int(frames.shape[0]),
-            "height": int(frames.shape[1]),
-            "width": int(frames.shape[2]),
-            "dtype": str(frames.dtype),
-            "files": [str(path.relative_to(directory)) for path in paths],
-        },
-        "gt": {name: f"gt/{name}.npy" for name in GT_NAMES},
-    }
-    if extra:
-        data["extra"] = extra
-    return write_json(manifest, data, indent=1)
+        directory.mkdir(parents=True, exist_ok=True)
+        paths = write_frames(
+            directory / "frames", self.frames, compression=compression, workers=workers
+        )
+        if self.has_ground_truth:
+            gt_dir = directory / "gt"
+            gt_dir.mkdir(exist_ok=True)
+            for name, array in self.ground_truth.arrays().items():
+                np.save(gt_dir / f"{name}.npy", array)
+        # The manifest is written last: a capture.json means a complete capture.
+        written = write_json(manifest, self.to_dict(directory, paths), indent=1)
+        object.__setattr__(self, "path", directory)
+        return written
+
+    @classmethod
+    def load(cls, directory: str | Path) -> Capture:
+        """Read a capture directory (frames and ground truth are read on first access)."""
+        from virtus.scene import Scene
+
+        directory = Path(directory)
+        manifest = directory / MANIFEST
+        if not manifest.is_file():
+            raise InputError("capture", f"a directory holding {MANIFEST}", str(directory))
+        data = read_json(manifest, "capture.json", expect=dict)
+        version = data.get("format")
+        if version not in READABLE_FORMATS:
+            raise InputError(f"{manifest} format", " or ".join(READABLE_FORMATS), version)
+        if version == CAPTURE_FORMAT:
+            unknown = sorted(set(data) - set(_KEYS))
+            if unknown:
+                raise InputError(str(manifest), f"keys among {list(_KEYS)}", f"unknown {unknown}")
+        for key in ("rig", "sequence", "frames"):
+            if not isinstance(data.get(key), dict):
+                raise InputError(f"{manifest} {key}", "an object", data.get(key))
+        rig = Rig.from_dict(data["rig"])
+        sequence = PatternSequence.from_dict(data["sequence"])
+        files = data["frames"].get("files")
+        if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
+            raise InputError(f"{manifest} frames.files", "a list of file names", files)
+        frame_files = tuple(_inside(directory, name, "frames.files") for name in files)
+        gt_entry = data.get("gt") or {}
+        if not isinstance(gt_entry, dict):
+            raise InputError(f"{manifest} gt", "an object of file names", gt_entry)
+        gt_files = {str(k): _inside(directory, v, "gt") for k, v in gt_entry.items()}
+        missing = [str(p) for p in (*frame_files, *gt_files.values()) if not p.is_file()]
+        if missing:
+            raise InputError(f"{manifest}", "the files it lists", f"missing {missing[:3]}")
+        sensor = Sensor.from_dict(data["sensor"]) if data.get("sensor") else None
+        bit_depth = data.get("bit_depth")
+        if bit_depth is None:  # format 1: 8 or 16 from the file dtype
+            bit_depth = (
+                sensor.bit_depth
+                if sensor
+                else (16 if data["frames"].get("dtype") == "uint16" else 8)
+            )
+        scene = Scene.from_dict(data["scene"], base_dir=directory) if data.get("scene") else None
+        cam2world = (
+            Pose.from_dict(data["cam2world"], "cam2world")
+            if data.get("cam2world")
+            else Pose.identity()
+        )
+        seed = data.get("seed")
+        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
+            raise InputError(f"{manifest} seed", "a non-negative integer or null", seed)
+        return cls(
+            sequence=sequence,
+            rig=rig,
+            cam2world=cam2world,
+            bit_depth=bit_depth,
+            sensor=sensor,
+            seed=seed,
+            scene=scene,
+            render=data.get("render") or {},
+            provenance=data.get("provenance") or {},
+            path=directory,
+            frame_files=frame_files,
+            gt_files=gt_files,
+        )
 
 
-def load_capture(directory: str | Path, *, load_gt: bool = True) -> Capture:
-    """Read a capture directory written by :func:`save_capture`.
+def _inside(directory: Path, name: object, what: str) -> Path:
+    """``directory / name`` for a relative name that stays inside ``directory``."""
+    if (
+        not isinstance(name, str)
+        or not name
+        or Path(name).is_absolute()
+        or ".." in Path(name).parts
+    ):
+        raise InputError(f"capture.json {what}", "relative file names inside the capture", name)
+    return directory / name
+
+
+def load_capture(directory: str | Path) -> Capture:
+    """Read a capture directory (:meth:`Capture.load`)."""
+    return Capture.load(directory)
+
+
+def import_capture(
+    images: str | Path | list[str | Path],
+    sequence: PatternSequence,
+    rig: Rig,
+    *,
+    bit_depth: int | None = None,
+    cam2world: Pose | None = None,
+    command: list[str] | None = None,
+) -> Capture:
+    """A capture from camera images taken on a real bench (or by another renderer).
 
     Parameters
     ----------
-    directory : the capture directory (holding ``capture.json``).
-    load_gt : read the ``gt/`` arrays (they are large: ~70 MB at 960 x 960).
+    images : a folder (its PNG/TIFF/BMP files in natural order: ``img2`` before ``img10``)
+        or an explicit list of image files, one per sequence frame, in sequence order.
+    sequence : what the projector showed.
+    rig : the bench's calibration (camera size must match the images).
+    bit_depth : the camera's ADC bits (8, 10, 12, 16); default: 8 for 8-bit images, else
+        the smallest of 10, 12, 16 that holds the largest value (a 12-bit camera stores
+        its numbers unscaled in 16-bit files). It sets the full scale that decoding's
+        thresholds are relative to.
+    cam2world : the camera pose, if known.
+    command : the command line to record (default ``sys.argv``).
     """
-    from virtus.patterns import PatternSequence
-    from virtus.scene import Scene
-
-    directory = Path(directory)
-    manifest = directory / "capture.json"
-    if not manifest.is_file():
-        raise InputError("capture", "a directory with capture.json", str(directory))
-    try:
-        data = json.loads(manifest.read_text())
-    except json.JSONDecodeError as error:
-        raise InputError(str(manifest), "valid JSON", error.msg) from None
-    if data.get("format") != CAPTURE_FORMAT:
-        raise InputError(f"{manifest} format", CAPTURE_FORMAT, data.get("format"))
-    rig = Rig.from_dict(data["rig"])
-    sequence = PatternSequence.from_dict(data["sequence"])
-    scene = Scene.from_dict(data["scene"], base_dir=directory) if data.get("scene") else None
-    files = [directory / name for name in data["frames"]["files"]]
+    files = list_images(images) if isinstance(images, str | Path) else [Path(p) for p in images]
     if len(files) != len(sequence):
-        raise InputError(f"{manifest} frames", f"{len(sequence)} files (one per frame)", len(files))
-    frames = read_frames(files)
-    gt: dict[str, np.ndarray] = {}
-    if load_gt:
-        for name, relative in data.get("gt", {}).items():
-            path = directory / relative
-            if not path.is_file():
-                raise InputError("capture gt", "the files listed in capture.json", str(path))
-            gt[name] = np.load(path)
-    metadata = {
-        key: value for key, value in data.items() if key not in ("rig", "sequence", "scene")
-    }
-    return Capture(frames, rig, sequence, scene, gt, metadata, directory)
+        raise InputError(
+            "images", f"{len(sequence)} images (one per sequence frame)", f"{len(files)} images"
+        )
+    frames = read_images(files)
+    found = bit_depth_of(frames)
+    if bit_depth is None:
+        bit_depth = found
+    elif bit_depth not in BIT_DEPTHS or (1 << bit_depth) - 1 < int(frames.max()):
+        raise InputError(
+            "bit_depth",
+            f"one of {BIT_DEPTHS} holding the largest value {int(frames.max())}",
+            bit_depth,
+        )
+    if frames.dtype == np.uint8 and bit_depth != 8:
+        raise InputError("bit_depth", "8 for 8-bit images", bit_depth)
+    return Capture(
+        sequence=sequence,
+        rig=rig,
+        frame_data=frames,
+        cam2world=cam2world or Pose.identity(),
+        bit_depth=bit_depth,
+        provenance={
+            **_provenance("imported", command),
+            "images": [str(p) for p in files],
+        },
+    )
+
+
+def rendered_provenance(command: list[str] | None = None) -> dict[str, Any]:
+    """Provenance of a capture made by the renderer."""
+    return _provenance("rendered", command)

@@ -9,6 +9,7 @@ printed as one line on stderr, with exit status 2 and no traceback.
 from __future__ import annotations
 
 import sys
+import warnings
 
 import typer
 
@@ -31,6 +32,7 @@ def _register_commands() -> None:
         decode_cmd,
         demo_cmd,
         evaluate_cmd,
+        import_cmd,
         patterns_cmd,
         reconstruct_cmd,
         rig_cmd,
@@ -43,6 +45,7 @@ def _register_commands() -> None:
         patterns_cmd,
         calibrate_cmd,
         capture_cmd,
+        import_cmd,
         decode_cmd,
         reconstruct_cmd,
         scan_cmd,
@@ -54,6 +57,11 @@ def _register_commands() -> None:
 _register_commands()
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ANN001
+    """Warnings as one line on stderr, without the source line."""
+    print(f"virtus: warning: {message}", file=sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the console script; ``argv`` defaults to ``sys.argv[1:]``.
 
@@ -62,6 +70,7 @@ def main(argv: list[str] | None = None) -> None:
     not among the choices; status 2), and errors raised by the library for bad input or
     missing files (:class:`VirtusError`, ``OSError``; status 2).
     """
+    warnings.showwarning = _show_warning
     try:
         status = app(args=argv, prog_name="virtus", standalone_mode=False)
     except typer.TyperException as error:

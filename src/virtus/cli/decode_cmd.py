@@ -1,4 +1,4 @@
-"""``virtus decode DIR``: decode a capture's frames into projector coordinates."""
+"""``virtus decode DIR``: decode a capture's frames into projector coordinates, with checks."""
 
 from __future__ import annotations
 
@@ -12,18 +12,42 @@ import typer
 def register(app: typer.Typer) -> None:
     @app.command("decode")
     def decode(
-        directory: Annotated[Path, typer.Argument(help="Capture directory (from virtus capture).")],
+        directory: Annotated[
+            Path, typer.Argument(help="Capture directory (virtus capture or virtus import).")
+        ],
+        min_modulation: Annotated[
+            float,
+            typer.Option(
+                help="Modulation threshold: fringe amplitude B as a fraction of full scale."
+            ),
+        ] = 0.02,
+        saturation_level: Annotated[
+            float | None,
+            typer.Option(help="Digital number at or above which a pixel is saturated (invalid)."),
+        ] = None,
+        repair: Annotated[
+            bool,
+            typer.Option("--repair", help="Repair fringe orders that disagree with the phase."),
+        ] = False,
     ) -> None:
         """Decode DIR/frames into DIR/decoded/: phase_v.npy, phase_h.npy (absolute phase, rad),
-        proj_uv.npy (H, W, 2 projector px), mask.npy, modulation.npy; NaN where invalid."""
+        proj_uv.npy (H, W, 2 projector px), mask.npy, modulation.npy, flagged.npy (likely
+        fringe-order errors), summary.json; NaN where invalid. Warns when many valid pixels
+        are flagged: the sequence description probably does not match the frames."""
         from rich.console import Console
         from rich.table import Table
 
+        from virtus.errors import VirtusError
         from virtus.pipeline import layout
         from virtus.pipeline.scan import decode_capture
 
         start = time.perf_counter()
-        decoded = decode_capture(directory)
+        decoded = decode_capture(
+            directory,
+            min_modulation=min_modulation,
+            saturation_level=saturation_level,
+            repair=repair,
+        )
         elapsed = time.perf_counter() - start
         mask = decoded.mask
         table = Table(title=f"virtus decode -> {directory / layout.DECODED_DIR}", show_header=False)
@@ -31,6 +55,17 @@ def register(app: typer.Typer) -> None:
         for name, valid in (("vertical fringes (u_p)", decoded.mask_v),
                             ("horizontal fringes (v_p)", decoded.mask_h)):  # fmt: skip
             table.add_row(name, f"{valid.mean():.1%} valid")
-        table.add_row("files", ", ".join(f"{n}.npy" for n in layout.DECODED_FILES))
+        flagged = int(decoded.flagged.sum())
+        table.add_row(
+            "flagged (likely order errors)",
+            f"{flagged} ({flagged / max(int(mask.sum()), 1):.2%} of decoded pixels)",
+        )
+        table.add_row("summary", str(directory / layout.DECODED_DIR / layout.DECODE_SUMMARY))
         table.add_row("time", f"{elapsed:.2f} s")
         Console().print(table)
+        if not mask.any():
+            raise VirtusError(
+                f"decode: no pixel of {directory} decoded (black, saturated or wrongly scaled "
+                f"frames, or a modulation threshold of {min_modulation} too high); "
+                f"summary in {layout.DECODED_DIR}/{layout.DECODE_SUMMARY}"
+            )

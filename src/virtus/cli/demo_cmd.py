@@ -7,14 +7,28 @@ from typing import Annotated, Any
 
 import typer
 
-from virtus.cli.options import LOOKUP_HELP, Lookup
+from virtus.cli.options import (
+    LookupOption,
+    NoiseOption,
+    RigOption,
+    SequenceOption,
+    SppOption,
+    VariantOption,
+    build_scanner,
+)
+from virtus.sensor import Lookup
 
 
 def register(app: typer.Typer) -> None:
     @app.command("demo")
     def demo(
         out: Annotated[Path, typer.Option(help="Output directory.")] = Path("virtus-demo"),
-        lookup: Annotated[Lookup, typer.Option(help=LOOKUP_HELP)] = Lookup.nearest,
+        lookup: LookupOption = Lookup.nearest,
+        rig: RigOption = None,
+        sequence: SequenceOption = None,
+        spp: SppOption = 4,
+        read_noise: NoiseOption = 0.0,
+        variant: VariantOption = None,
     ) -> None:
         """Calibrate the paper's rig with its 18 board poses, capture the 100 mm sphere,
         reconstruct it with the calibrated parameters, fit a sphere, and compare with the
@@ -27,9 +41,12 @@ def register(app: typer.Typer) -> None:
             TimeElapsedColumn,
         )
 
-        from virtus.pipeline.demo import DemoConfig, run_demo
-        from virtus.pipeline.scan import ScanSettings
+        from virtus.pipeline.demo import run_demo
 
+        scanner = build_scanner(
+            rig=rig, sequence=sequence, lookup=lookup, spp=spp, read_noise_dn=read_noise,
+            variant=variant,
+        )  # fmt: skip
         console = Console()
         with Progress(
             TextColumn("[bold]{task.description}"),
@@ -47,8 +64,7 @@ def register(app: typer.Typer) -> None:
                     bar.update(task, description=f"{step} ({done}/{total} board poses)",
                                completed=done, total=total)  # fmt: skip
 
-            config = DemoConfig(scan=ScanSettings(lookup=lookup.value))
-            result = run_demo(out, config, progress=progress)
+            result = run_demo(out, progress=progress, scanner=scanner)
         _print_table(console, result.metrics)
         console.print(f"wrote {out / 'metrics.json'}, {out / 'calibration.json'}, "
                       f"{out / 'scan' / 'points.ply'}")  # fmt: skip

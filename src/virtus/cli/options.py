@@ -1,21 +1,102 @@
-"""Option types shared by several sub-commands."""
+"""Options shared by several sub-commands, and the one place that builds a Scanner from them."""
 
 from __future__ import annotations
 
 from enum import StrEnum
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+
+from virtus.sensor import Lookup
+
+if TYPE_CHECKING:
+    from virtus.scanner import Scanner
+
+LOOKUP_HELP = "Projector pixel model: nearest (sharp DMD pixels) or bilinear (blurred by ~1 px)."
+
+#: ``--rig``: the true rig of the virtual scanner.
+RigOption = Annotated[
+    Path | None,
+    typer.Option(
+        help="Rig JSON (or a calibration file in the rig schema); default: the paper's rig."
+    ),
+]
+#: ``--sequence``: the projected patterns.
+SequenceOption = Annotated[
+    Path | None,
+    typer.Option(
+        help="Pattern sequence file (YAML/JSON, see `virtus patterns`); default: the paper's "
+        "52 frames."
+    ),
+]
 
 
-class Lookup(StrEnum):
-    """Projector pattern lookup of the renderer.
+class LengthUnit(StrEnum):
+    """Length unit of a calibration file's translations."""
 
-    ``nearest``: sharp DMD pixels (a staircase of about 0.15-0.2 projector px RMS in decoded
-    coordinates when a camera pixel is smaller than a projector pixel on the object);
-    ``bilinear``: each DMD pixel blurred over about one pixel, as by a projector lens that
-    just resolves its pixels.
-    """
-
-    nearest = "nearest"
-    bilinear = "bilinear"
+    mm = "mm"
+    m = "m"
 
 
-LOOKUP_HELP = "Pattern lookup: nearest (sharp DMD pixels) or bilinear (pixels blurred by ~1 px)."
+#: ``--units``: for calibration files that state no unit (never guessed).
+UnitsOption = Annotated[
+    LengthUnit | None,
+    typer.Option(help="Length unit of a calibration file that states none: mm or m."),
+]
+LookupOption = Annotated[Lookup, typer.Option(help=LOOKUP_HELP)]
+SppOption = Annotated[int, typer.Option(help="Supersamples per pixel (a square: 1, 4, 9...).")]
+BitDepthOption = Annotated[int, typer.Option(help="Camera ADC bit depth: 8, 10, 12 or 16.")]
+NoiseOption = Annotated[
+    float, typer.Option(help="Camera read noise, DN (standard deviation; 0 = noise-free).")
+]
+VariantOption = Annotated[
+    str | None, typer.Option(help="Mitsuba variant (default: CUDA if it works, else LLVM).")
+]
+SeedOption = Annotated[
+    int, typer.Option(help="Seed of the random streams (noise, random poses), >= 0.")
+]
+
+
+def load_sequence_option(path: Path | None, width: int, height: int):  # noqa: ANN201
+    """The sequence of ``--sequence`` (checked against the projector size), or the paper's."""
+    from virtus.errors import InputError
+    from virtus.patterns import default_sequence, load_sequence_file
+
+    if path is None:
+        return default_sequence(width, height)
+    sequence, _files = load_sequence_file(path)
+    if (sequence.width, sequence.height) != (width, height):
+        raise InputError(
+            "--sequence",
+            f"patterns for the rig's {width}x{height} px projector",
+            f"{sequence.width}x{sequence.height} px in {path}",
+        )
+    return sequence
+
+
+def build_scanner(
+    *,
+    rig: Path | None = None,
+    sequence: Path | None = None,
+    lookup: Lookup = Lookup.nearest,
+    spp: int = 4,
+    bit_depth: int = 8,
+    read_noise_dn: float = 0.0,
+    variant: str | None = None,
+) -> Scanner:
+    """The Scanner the command-line options describe (every job builds it here)."""
+    from virtus.devices import Rig, default_rig
+    from virtus.scanner import Scanner
+    from virtus.sensor import Sensor
+
+    the_rig = Rig.load_json(rig) if rig is not None else default_rig()
+    projector = the_rig.projector.intrinsics
+    return Scanner(
+        rig=the_rig,
+        sequence=load_sequence_option(sequence, projector.width, projector.height),
+        lookup=lookup,
+        sensor=Sensor(bit_depth=bit_depth, read_noise_dn=read_noise_dn),
+        spp=spp,
+        variant=variant,
+    )

@@ -9,6 +9,8 @@ from typing import Annotated
 
 import typer
 
+from virtus.cli.options import UnitsOption
+
 
 class UseCoordinates(StrEnum):
     uv = "uv"
@@ -23,10 +25,12 @@ def register(app: typer.Typer) -> None:
         calibration: Annotated[
             Path | None,
             typer.Option(
-                help="Calibration file (rig-schema JSON, e.g. calibration.json; OpenCV YAML; "
-                "or a paper_txt/ folder); default: the rig in DIR/capture.json."
+                help="Calibration file (rig-schema JSON, e.g. calibration.json; OpenCV YAML/XML; "
+                "or a folder of the paper code's text files); default: the rig in "
+                "DIR/capture.json."
             ),
         ] = None,
+        units: UnitsOption = None,
         out: Annotated[
             Path | None, typer.Option(help="Output PLY; default: DIR/points.ply.")
         ] = None,
@@ -45,7 +49,9 @@ def register(app: typer.Typer) -> None:
         from virtus.pipeline.scan import reconstruct_capture
 
         start = time.perf_counter()
-        recon = reconstruct_capture(directory, calibration, out, use=use.value)
+        recon = reconstruct_capture(
+            directory, calibration, out, use=use.value, units=units and units.value
+        )
         elapsed = time.perf_counter() - start
         depth = recon.depth[recon.mask]
         ply = out if out is not None else directory / layout.POINTS_PLY

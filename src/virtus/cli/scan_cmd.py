@@ -7,8 +7,20 @@ from typing import Annotated
 
 import typer
 
-from virtus.cli.options import LOOKUP_HELP, Lookup
+from virtus.cli.options import (
+    BitDepthOption,
+    LookupOption,
+    NoiseOption,
+    RigOption,
+    SeedOption,
+    SequenceOption,
+    SppOption,
+    UnitsOption,
+    VariantOption,
+    build_scanner,
+)
 from virtus.paper import C2M_MAE_MM
+from virtus.sensor import Lookup
 
 
 def register(app: typer.Typer) -> None:
@@ -26,14 +38,15 @@ def register(app: typer.Typer) -> None:
             Path | None,
             typer.Option(help="Calibration file to reconstruct with; default: the true rig."),
         ] = None,
-        rig: Annotated[
-            Path | None, typer.Option(help="True rig JSON that renders; default: the paper's.")
-        ] = None,
-        spp: Annotated[int, typer.Option(help="Supersamples per pixel (1, 4, 9, ...).")] = 4,
-        lookup: Annotated[
-            Lookup,
-            typer.Option(help=LOOKUP_HELP),
-        ] = Lookup.nearest,
+        units: UnitsOption = None,
+        rig: RigOption = None,
+        sequence: SequenceOption = None,
+        spp: SppOption = 4,
+        lookup: LookupOption = Lookup.nearest,
+        bit_depth: BitDepthOption = 8,
+        read_noise: NoiseOption = 0.0,
+        seed: SeedOption = 0,
+        variant: VariantOption = None,
         turntable: Annotated[
             int,
             typer.Option(
@@ -53,24 +66,33 @@ def register(app: typer.Typer) -> None:
         from rich.console import Console
         from rich.table import Table
 
-        from virtus.devices import Rig
-        from virtus.pipeline.scan import ScanSettings
+        from virtus.pipeline.scan import ScanSettings, load_rig_file
         from virtus.pipeline.scan import scan as run_scan
         from virtus.pipeline.scenes import resolve_scene
+        from virtus.sensor import as_seed
 
-        settings = ScanSettings(spp=spp, lookup=lookup.value)
-        true_rig = Rig.load_json(rig) if rig is not None else None
+        settings = ScanSettings(seed=as_seed(seed))
+        scanner = build_scanner(
+            rig=rig, sequence=sequence, lookup=lookup, spp=spp, bit_depth=bit_depth,
+            read_noise_dn=read_noise, variant=variant,
+        )  # fmt: skip
+        # Read the calibration before anything is rendered or written.
+        used = (
+            None
+            if calibration is None
+            else load_rig_file(calibration, scanner.rig, units=units and units.value)
+        )
         the_scene = resolve_scene(scene, out)
         console = Console()
         if turntable:
-            _turntable(console, the_scene, out, turntable, true_rig, calibration, settings,
+            _turntable(console, the_scene, out, turntable, scanner, used, settings,
                        refine, overwrite)  # fmt: skip
             return
         result = run_scan(
             the_scene,
             out,
-            rig=true_rig,
-            calibration=calibration,
+            scanner=scanner,
+            calibration=used,
             settings=settings,
             overwrite=overwrite,
         )
@@ -88,7 +110,7 @@ def register(app: typer.Typer) -> None:
         console.print(f"next: virtus evaluate {out}  (C2M against the scene's meshes)")
 
 
-def _turntable(console, scene, out, n_views, rig, calibration, settings, refine, overwrite):  # noqa: ANN001
+def _turntable(console, scene, out, n_views, scanner, calibration, settings, refine, overwrite):  # noqa: ANN001
     from rich.table import Table
 
     from virtus.errors import InputError
@@ -105,7 +127,7 @@ def _turntable(console, scene, out, n_views, rig, calibration, settings, refine,
         n_views=n_views,
         scale_to_m=obj.scale_to_m,
         start=obj.pose,
-        rig=rig,
+        scanner=scanner,
         calibration=calibration,
         settings=settings,
         refine=refine,

@@ -28,6 +28,7 @@ from virtus.errors import VirtusError
 from virtus.jsonio import write_json
 from virtus.metrology import SphereFit, fit_sphere
 from virtus.pipeline.scan import Reconstruction, ScanSettings, reconstruct, scan
+from virtus.scanner import Scanner
 
 __all__ = ["PAPER", "DemoConfig", "DemoResult", "run_demo", "sphere_roi_fit"]
 
@@ -45,11 +46,8 @@ class DemoConfig:
     """Calibration board poses: ``"paper"`` (the paper's 18) or ``"random:N"``."""
     board: str = "7x13"
     """Asymmetric circle board ROWSxCOLS."""
-    calibration_spp: int = 4
-    """Renderer supersamples per pixel for the calibration captures."""
     scan: ScanSettings = field(default_factory=ScanSettings)
-    """Capture and reconstruction of the sphere. Its pattern lookup (default ``nearest``:
-    sharp DMD pixels) is also used for the calibration captures: one sensor model."""
+    """Reconstruction of the sphere."""
     sphere_threshold_m: float = 1e-3
     """MSAC inlier threshold of the sphere fit (m). About 3x the point noise of sharp DMD
     pixels (fit RMS ~0.3 mm): farther points are gross errors (mixed or mis-decoded pixels)."""
@@ -118,6 +116,7 @@ def run_demo(
     config: DemoConfig | None = None,
     *,
     progress: Any = None,
+    scanner: Scanner | None = None,
 ) -> DemoResult:
     """Calibrate, capture the sphere, reconstruct with the calibration, fit, report.
 
@@ -125,6 +124,8 @@ def run_demo(
     ----------
     out_dir : output directory (created; an existing demo there is replaced).
     config : settings (defaults reproduce the paper's experiment).
+    scanner : the virtual scanner that captures the board poses and the sphere -- one
+        sensor model for both (default: the paper's system, sharp DMD pixels).
     progress : optional ``progress(step: str)`` callback, and ``progress(step, done, total)``
         during calibration.
 
@@ -132,8 +133,7 @@ def run_demo(
     -------
     :class:`DemoResult`; ``DIR/metrics.json``, ``DIR/calibration.json``, ``DIR/scan/`` written.
     """
-    from virtus.calib.episode import calibrate_rig
-    from virtus.devices import default_rig
+    from virtus.pipeline.calibrate import calibrate_rig
     from virtus.scene import SphereObject, default_scene
 
     config = config or DemoConfig()
@@ -143,15 +143,14 @@ def run_demo(
     t_start = time.perf_counter()
     timing: dict[str, float] = {}
 
-    true_rig = default_rig()
+    scanner = scanner or Scanner()
+    true_rig = scanner.rig
     say("calibration")
     start = time.perf_counter()
     calibration = calibrate_rig(
-        true_rig,
+        scanner,
         board=config.board,
         poses=config.poses,
-        spp=config.calibration_spp,
-        lookup=config.scan.lookup,
         rng=config.seed,
         progress=lambda done, total, name: say("calibration", done, total),
         out_dir=root,
@@ -165,7 +164,7 @@ def run_demo(
     scanned = scan(
         scene,
         root / "scan",
-        rig=true_rig,
+        scanner=scanner,
         calibration=calibration.rig,
         settings=config.scan,
         overwrite=True,
@@ -241,6 +240,7 @@ def run_demo(
         "paper": PAPER,
         "targets": TARGETS,
         "config": config.to_dict(),
+        "scanner": scanner.to_dict(),
         "provenance": _provenance(),
         "files": {
             "calibration": "calibration.json",

@@ -132,7 +132,7 @@ def evaluate_scan(
     from virtus.capture import load_capture
 
     directory = Path(scan_dir)
-    capture = load_capture(directory, load_gt=False)
+    capture = load_capture(directory)
     if capture.scene is None:
         raise VirtusError(f"evaluate: {directory}/capture.json holds no scene to compare with")
     meshes = scene_meshes(capture.scene)

@@ -8,6 +8,10 @@ A scan directory is a capture directory (the layout of ``virtus capture``: frame
     DIR/decoded/proj_uv.npy     (H, W, 2) float64 projector coordinates (u_p, v_p), px
     DIR/decoded/mask.npy        (H, W) bool, decoded in every direction
     DIR/decoded/modulation.npy  (H, W) float64 fringe amplitude B, frame units
+    DIR/decoded/flagged.npy     (H, W) bool, valid pixels whose fringe order looks wrong
+    DIR/decoded/summary.json    valid and flagged shares, modulation percentiles
+    DIR/decoded/source.json     the capture's SHA-256 and the decode options (written last:
+                                decoded/ is stale when the checksum no longer matches)
     DIR/reconstruction/points.npy  (H, W, 3) float64 camera frame, metres, NaN invalid
     DIR/reconstruction/depth.npy   (H, W) float64 camera-frame z, metres, NaN invalid
     DIR/reconstruction/mask.npy    (H, W) bool, pixels with a point
@@ -19,7 +23,9 @@ A scan directory is a capture directory (the layout of ``virtus capture``: frame
 from __future__ import annotations
 
 DECODED_DIR = "decoded"
-DECODED_FILES = ("phase_v", "phase_h", "proj_uv", "mask", "modulation")
+DECODED_FILES = ("phase_v", "phase_h", "proj_uv", "mask", "modulation", "flagged")
+DECODE_SUMMARY = "summary.json"
+DECODED_SOURCE = "source.json"
 RECONSTRUCTION_DIR = "reconstruction"
 POINTS_PLY = "points.ply"
 EVALUATION_JSON = "evaluation.json"

@@ -13,15 +13,19 @@ discontinuities (mixed pixels at silhouettes; :func:`virtus.reconstruct.depth_ed
 
 from __future__ import annotations
 
-import json
+import hashlib
+import shutil
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from virtus.capture import MANIFEST, Capture
 from virtus.devices import Rig
-from virtus.errors import InputError, VirtusError
+from virtus.errors import VirtusError
+from virtus.jsonio import write_json
+from virtus.patterns import DecodeResult
 from virtus.pipeline import layout
 from virtus.ply import write_ply
 from virtus.reconstruct import (
@@ -31,6 +35,9 @@ from virtus.reconstruct import (
     points_from_decoded,
     valid_points,
 )
+from virtus.safeio import load_npy, read_json
+from virtus.scanner import Scanner
+from virtus.transforms import Pose
 
 __all__ = [
     "Reconstruction",
@@ -44,26 +51,23 @@ __all__ = [
     "scan",
 ]
 
+#: Default fringe modulation threshold of decoding, a fraction of full scale.
+DEFAULT_MIN_MODULATION = 0.02
 #: Depth-discontinuity filter default, in pixel footprints (see ``depth_edge_mask``).
 EDGE_MAX_STEP = 20.0
 
 
 @dataclass(frozen=True)
 class ScanSettings:
-    """How a scene is captured and reconstructed (written to ``capture.json`` / metrics)."""
+    """How a capture is reconstructed, and the seed of its rendering (how it is rendered is
+    the :class:`~virtus.scanner.Scanner`'s business)."""
 
-    spp: int = 4
-    """Renderer supersamples per pixel (a perfect square)."""
-    lookup: str = "nearest"
-    """Pattern lookup: ``"nearest"`` (DMD pixels, as in calibration) or ``"bilinear"``."""
-    bit_depth: int = 8
-    """Camera bit depth (8 or 16)."""
     use: Use = "uv"
     """Projector coordinates used by triangulation: ``"uv"``, ``"u"`` or ``"v"``."""
     edge_max_step: float | None = EDGE_MAX_STEP
     """Depth-discontinuity filter in pixel footprints; None keeps every decoded pixel."""
     seed: int = 0
-    """Seed of the renderer's sensor stage."""
+    """Seed of the capture's counter-based noise streams (>= 0)."""
 
     def to_dict(self) -> dict[str, Any]:
         """Every setting by name (JSON-ready)."""
@@ -149,81 +153,101 @@ def reconstruct(
     return Reconstruction(points, edges, rig)
 
 
-def load_rig_file(path: str | Path, like: Rig | None = None) -> Rig:
-    """Read a rig from a calibration file.
+def load_rig_file(path: str | Path, like: Rig | None = None, *, units: str | None = None) -> Rig:
+    """Read a rig from any calibration file :func:`virtus.calib.io.load_calibration` reads;
+    image sizes a file lacks (the paper code's text files) are taken from ``like`` (e.g. the
+    capture's rig). ``units``: the length unit of a file that states none."""
+    from virtus.calib.io import load_calibration
 
-    * ``.json``: the rig schema of DESIGN.md section 3 (``calibration.json`` of ``virtus
-      calibrate``, ``capture.json``, ``virtus rig info --json``); extra keys are ignored, and a
-      ``rig`` key holding the schema is accepted too.
-    * ``.yaml`` / ``.yml``: the OpenCV YAML that ``virtus calibrate`` writes.
-    * a directory: the paper code's text files (``paper_txt/`` of ``virtus calibrate``), which
-      carry no image sizes: they are taken from ``like`` (e.g. the capture's rig), else the
-      paper's (camera 960 x 960, projector 912 x 1140).
-    """
-    source = Path(path)
-    if source.is_dir():
-        from virtus.calib.io import load_paper_txt
-
-        if like is None:
-            return load_paper_txt(source)
+    sizes = {}
+    if like is not None:
         cam, proj = like.camera.intrinsics, like.projector.intrinsics
-        return load_paper_txt(source, (cam.width, cam.height), (proj.width, proj.height))
-    if not source.is_file():
-        raise InputError("calibration", "an existing calibration file or directory", str(source))
-    suffix = source.suffix.lower()
-    if suffix in (".yaml", ".yml"):
-        from virtus.calib.io import load_opencv_yaml
-
-        return load_opencv_yaml(source)
-    if suffix != ".json":
-        raise InputError(
-            "calibration",
-            "a .json (rig schema) or OpenCV .yaml file, or a paper_txt/ folder",
-            str(source),
-        )
-    try:
-        data = json.loads(source.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as error:
-        raise InputError(str(source), "a JSON file", f"invalid JSON ({error})") from None
-    if isinstance(data, dict) and "camera" not in data and isinstance(data.get("rig"), dict):
-        data = data["rig"]
-    return Rig.from_dict(data)
+        sizes = {
+            "camera_size": (cam.width, cam.height),
+            "projector_size": (proj.width, proj.height),
+        }
+    return load_calibration(path, units=units, **sizes)
 
 
 # --- capture directories -------------------------------------------------------------------
 
 
-def decode_capture(capture_dir: str | Path, *, save: bool = True) -> Any:
+def frames_checksum(capture: Capture) -> str:
+    """SHA-256 of a saved capture's manifest and frame files: what its derived files
+    (``decoded/``) were computed from."""
+    if capture.path is None or not capture.frame_files:
+        raise VirtusError("frames_checksum: the capture has not been saved")
+    digest = hashlib.sha256((capture.path / MANIFEST).read_bytes())
+    for path in capture.frame_files:
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def save_decoded(directory: str | Path, decoded: DecodeResult, source: dict[str, Any]) -> Path:
+    """Write ``decoded/`` (arrays, ``summary.json``) and ``source.json`` last, which ties
+    them to the capture's checksum and the decode options; returns the folder."""
+    folder = Path(directory) / layout.DECODED_DIR
+    shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir(parents=True)
+    for name in layout.DECODED_FILES:
+        np.save(folder / f"{name}.npy", getattr(decoded, name))
+    write_json(folder / layout.DECODE_SUMMARY, decoded.summary())
+    write_json(folder / layout.DECODED_SOURCE, source)
+    return folder
+
+
+def decode_capture(
+    capture_dir: str | Path,
+    *,
+    save: bool = True,
+    min_modulation: float = DEFAULT_MIN_MODULATION,
+    saturation_level: float | None = None,
+    repair: bool = False,
+) -> DecodeResult:
     """Decode a capture directory's frames into projector coordinates.
 
     Parameters
     ----------
-    capture_dir : directory written by ``virtus capture`` / :func:`scan`.
-    save : write ``decoded/`` (phase_v, phase_h, proj_uv, mask, modulation ``.npy``).
+    capture_dir : a capture directory (``virtus capture``, ``virtus import``, a scan).
+    save : write ``decoded/`` (see :mod:`virtus.pipeline.layout`) with ``summary.json``
+        and ``source.json`` (the capture's checksum and these options).
+    min_modulation : fringe modulation threshold, a fraction of the capture's full scale.
+    saturation_level : digital number at and above which a pixel is saturated (invalid);
+        None disables the check.
+    repair : repair pixels whose fringe order disagrees with the wrapped phase.
 
     Returns
     -------
     The sequence's ``DecodeResult`` (``proj_uv`` (H, W, 2), ``phase_v``, ``phase_h``,
-    ``mask``, ...).
+    ``mask``, ``flagged``, ``summary()``, ...).
     """
-    from virtus.capture import load_capture
-
-    capture = load_capture(capture_dir, load_gt=False)
-    decoded = capture.sequence.decode(capture.frames)
+    capture = Capture.load(capture_dir)
+    options = {
+        "min_modulation": min_modulation,
+        "saturation_level": saturation_level,
+        "repair": repair,
+    }
+    decoded = capture.decode(**options)
     if save:
-        folder = Path(capture_dir) / layout.DECODED_DIR
-        folder.mkdir(parents=True, exist_ok=True)
-        for name in layout.DECODED_FILES:
-            np.save(folder / f"{name}.npy", getattr(decoded, name))
+        source = {"capture_sha256": frames_checksum(capture), "options": options}
+        save_decoded(capture_dir, decoded, source)
     return decoded
 
 
 def load_decoded(capture_dir: str | Path) -> tuple[np.ndarray, np.ndarray] | None:
-    """``(proj_uv (H, W, 2), mask (H, W))`` from ``decoded/``, or None if not decoded yet."""
+    """``(proj_uv (H, W, 2), mask (H, W))`` from ``decoded/``, or None when there is none or
+    it was decoded from other frames than the capture holds now (stale)."""
     folder = Path(capture_dir) / layout.DECODED_DIR
-    if not (folder / "proj_uv.npy").is_file() or not (folder / "mask.npy").is_file():
+    source_file = folder / layout.DECODED_SOURCE
+    if not source_file.is_file():
         return None
-    return np.load(folder / "proj_uv.npy"), np.load(folder / "mask.npy")
+    source = read_json(source_file, "decoded/source.json", expect=dict)
+    if source.get("capture_sha256") != frames_checksum(Capture.load(capture_dir)):
+        return None
+    return (
+        load_npy(folder / "proj_uv.npy", "decoded proj_uv"),
+        load_npy(folder / "mask.npy", "decoded mask"),
+    )
 
 
 def reconstruct_capture(
@@ -233,35 +257,38 @@ def reconstruct_capture(
     *,
     use: Use = "uv",
     edge_max_step: float | None = EDGE_MAX_STEP,
+    units: str | None = None,
 ) -> Reconstruction:
-    """Triangulate a capture directory (decoding it first if needed).
+    """Triangulate a capture directory (decoding it first if needed or stale).
 
     Parameters
     ----------
     capture_dir : capture or scan directory.
-    calibration : a calibration file (see :func:`load_rig_file`) or a rig; None uses the rig
-        in ``capture.json`` (the true rig of a virtual capture).
+    calibration : a calibration file (see :func:`virtus.calib.io.load_calibration`) or a
+        rig; None uses the rig in ``capture.json`` (the true rig of a virtual capture).
     out_ply : PLY path; default ``capture_dir/points.ply``.
     use, edge_max_step : see :func:`reconstruct`.
+    units : length unit of a calibration file that states none (``"mm"`` or ``"m"``).
     """
+    capture = Capture.load(capture_dir)
+    if isinstance(calibration, Rig):
+        rig = calibration
+    elif calibration is None:
+        rig = capture.rig
+    else:
+        rig = load_rig_file(calibration, capture.rig, units=units)
+    cam = rig.camera.intrinsics
+    expected = (capture.rig.camera.height, capture.rig.camera.width)
+    if expected != (cam.height, cam.width):
+        raise VirtusError(
+            f"calibration: camera is {cam.width}x{cam.height} px but the capture is "
+            f"{expected[1]}x{expected[0]} px"
+        )
     decoded = load_decoded(capture_dir)
     if decoded is None:
         result = decode_capture(capture_dir)
         decoded = (result.proj_uv, result.mask)
-    if isinstance(calibration, Rig):
-        rig = calibration
-    else:
-        from virtus.capture import load_capture
-
-        capture_rig = load_capture(capture_dir, load_gt=False).rig
-        rig = capture_rig if calibration is None else load_rig_file(calibration, capture_rig)
     proj_uv, mask = decoded
-    cam = rig.camera.intrinsics
-    if proj_uv.shape[:2] != (cam.height, cam.width):
-        raise VirtusError(
-            f"calibration: camera is {cam.width}x{cam.height} px but the capture is "
-            f"{proj_uv.shape[1]}x{proj_uv.shape[0]} px"
-        )
     recon = reconstruct(rig, proj_uv, mask, use=use, edge_max_step=edge_max_step)
     recon.save(capture_dir, out_ply)
     return recon
@@ -278,6 +305,7 @@ class ScanResult:
     decoded : the sequence's DecodeResult.
     ply_path : the written point cloud.
     timing_s : seconds per step (render, decode, reconstruct).
+    capture : the rendered capture (frames, ground truth).
     """
 
     directory: Path
@@ -285,78 +313,64 @@ class ScanResult:
     decoded: Any
     ply_path: Path
     timing_s: dict[str, float] = field(default_factory=dict)
+    capture: Capture | None = None
 
 
 def scan(
     scene: Any,
     out_dir: str | Path,
     *,
-    rig: Rig | None = None,
+    scanner: Scanner | None = None,
     calibration: str | Path | Rig | None = None,
     settings: ScanSettings | None = None,
     overwrite: bool = False,
+    cam2world: Pose | None = None,
 ) -> ScanResult:
-    """Capture ``scene`` with the virtual sensor, then decode and reconstruct it.
+    """Capture ``scene`` with the virtual scanner, then decode and reconstruct it.
 
     Parameters
     ----------
     scene : a :class:`virtus.scene.Scene`.
     out_dir : scan directory to write (created).
-    rig : the true rig that renders the frames (default: the paper's rig).
-    calibration : rig or calibration file used for triangulation; None uses ``rig``
-        (reconstruction with the true parameters).
-    settings : capture and reconstruction settings.
+    scanner : the virtual scanner (its rig is the truth that renders the frames; default:
+        the paper's system).
+    calibration : rig or calibration file used for triangulation; None uses the scanner's
+        rig (reconstruction with the true parameters).
+    settings : reconstruction settings and the capture's seed.
     overwrite : replace an existing capture in ``out_dir``.
+    cam2world : camera pose in the scene's world frame (default identity).
     """
     import time
 
-    from virtus.capture import save_capture
-    from virtus.devices import default_rig
-    from virtus.patterns import default_sequence
-    from virtus.render import render
-
     settings = settings or ScanSettings()
-    true_rig = rig or default_rig()
+    scanner = scanner or Scanner()
     # Read the calibration before rendering: a bad file must not leave a capture behind.
     if calibration is None:
-        used = true_rig
+        used = scanner.rig
     elif isinstance(calibration, Rig):
         used = calibration
     else:
-        used = load_rig_file(calibration)
-    proj = true_rig.projector.intrinsics
-    sequence = default_sequence(proj.width, proj.height)
+        used = load_rig_file(calibration, scanner.rig)
     directory = Path(out_dir)
     timing: dict[str, float] = {}
 
     start = time.perf_counter()
-    rendering = render(
-        true_rig,
-        scene,
-        sequence,
-        spp=settings.spp,
-        lookup=settings.lookup,  # type: ignore[arg-type]
-        bit_depth=settings.bit_depth,
-        rng=settings.seed,
-    )
-    extra = {"scan": settings.to_dict()}
-    save_capture(
-        directory,
-        rendering,
-        rig=true_rig,
-        sequence=sequence,
-        scene=scene,
-        overwrite=overwrite,
-        extra=extra,
-    )
+    capture = scanner.capture(scene, cam2world=cam2world, rng=settings.seed)
+    capture.save(directory, overwrite=overwrite)
+    for stale in (layout.RECONSTRUCTION_DIR, layout.DECODED_DIR):
+        shutil.rmtree(directory / stale, ignore_errors=True)
+    for stale in (layout.POINTS_PLY, layout.EVALUATION_JSON):
+        (directory / stale).unlink(missing_ok=True)
     timing["render_s"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    decoded = sequence.decode(rendering.frames)
-    folder = directory / layout.DECODED_DIR
-    folder.mkdir(parents=True, exist_ok=True)
-    for name in layout.DECODED_FILES:
-        np.save(folder / f"{name}.npy", getattr(decoded, name))
+    decoded = capture.decode()
+    source = {
+        "capture_sha256": frames_checksum(capture),
+        "options": {"min_modulation": DEFAULT_MIN_MODULATION, "saturation_level": None,
+                    "repair": False},
+    }  # fmt: skip
+    save_decoded(directory, decoded, source)
     timing["decode_s"] = time.perf_counter() - start
 
     start = time.perf_counter()
@@ -365,4 +379,4 @@ def scan(
     )
     ply = recon.save(directory)
     timing["reconstruct_s"] = time.perf_counter() - start
-    return ScanResult(directory, recon, decoded, ply, timing)
+    return ScanResult(directory, recon, decoded, ply, timing, capture)

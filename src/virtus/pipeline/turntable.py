@@ -24,12 +24,13 @@ import numpy as np
 
 from virtus.checks import positive_int
 from virtus.devices import Rig
-from virtus.errors import VirtusError
+from virtus.errors import InputError, VirtusError
 from virtus.jsonio import write_json
 from virtus.metrology import C2MResult, MeshIndex, cloud_to_mesh, icp_to_mesh
 from virtus.pipeline.scan import ScanSettings, scan
 from virtus.pipeline.scenes import FREEFORM_CENTRE_M
 from virtus.ply import write_ply
+from virtus.scanner import Scanner
 from virtus.transforms import Pose
 
 __all__ = ["TurntableResult", "turntable_poses", "turntable_scan"]
@@ -39,6 +40,8 @@ __all__ = ["TurntableResult", "turntable_poses", "turntable_scan"]
 _BOX_MARGIN_M = 0.003
 #: ICP pair rejection for per-view refinement and the global registration (m).
 _ICP_MAX_DISTANCE_M = 0.002
+#: Most turntable views (one per degree): each view is a whole capture on disk.
+MAX_VIEWS = 360
 
 
 def turntable_poses(n_views: int, start: Pose | None = None) -> list[Pose]:
@@ -108,7 +111,7 @@ def turntable_scan(
     n_views: int = 8,
     scale_to_m: float = 1.0,
     start: Pose | None = None,
-    rig: Rig | None = None,
+    scanner: Scanner | None = None,
     calibration: str | Path | Rig | None = None,
     settings: ScanSettings | None = None,
     refine: bool = False,
@@ -124,8 +127,8 @@ def turntable_scan(
     n_views : number of turntable angles.
     scale_to_m : metres per mesh-file unit.
     start : object2cam of view 0 (see :func:`turntable_poses`).
-    rig : true rig (default: the paper's).
-    calibration : rig or calibration file to triangulate with (default: ``rig``).
+    scanner : the virtual scanner (default: the paper's system).
+    calibration : rig or calibration file to triangulate with (default: the scanner's rig).
     settings : scan settings.
     refine : refine each view's known pose by ICP against the mesh before merging.
     overwrite : replace existing captures.
@@ -135,6 +138,10 @@ def turntable_scan(
     from virtus.scene import MeshObject, Scene
 
     settings = settings or ScanSettings()
+    scanner = scanner or Scanner()
+    n_views = positive_int("n_views", n_views)
+    if n_views > MAX_VIEWS:
+        raise InputError("n_views", f"at most {MAX_VIEWS} turntable views", n_views)
     root = Path(out_dir)
     root.mkdir(parents=True, exist_ok=True)
     mesh = trimesh.load(mesh_path, force="mesh", process=False)
@@ -152,7 +159,7 @@ def turntable_scan(
         result = scan(
             scene,
             root / f"view_{k}",
-            rig=rig,
+            scanner=scanner,
             calibration=calibration,
             settings=settings,
             overwrite=overwrite,
@@ -186,6 +193,7 @@ def turntable_scan(
     result = TurntableResult(merged, counts, poses, refinements, c2m, ply, timing)
     report = result.to_dict()
     report["settings"] = settings.to_dict()
+    report["scanner"] = scanner.to_dict()
     report["refine"] = refine
     report["mesh"] = str(mesh_path)
     write_json(root / "turntable.json", report)

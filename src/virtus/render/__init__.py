@@ -1,6 +1,7 @@
 """Physically based capture renderer on Mitsuba 3 (the only package that imports Mitsuba).
 
-One ray-tracing pass per pose, every frame of a pattern sequence synthesised from it:
+One ray-tracing pass per pose, every frame of a pattern sequence synthesised from it, digitised
+by the camera model of :mod:`virtus.sensor`, with :mod:`virtus.groundtruth` from the same pass:
 
 * :mod:`~virtus.render.backend` -- Mitsuba variant choice (CUDA if it works, else LLVM).
 * :mod:`~virtus.render.mitsuba_scene` -- virtus scene -> Mitsuba shapes and BSDFs.
@@ -8,23 +9,17 @@ One ray-tracing pass per pose, every frame of a pattern sequence synthesised fro
 * :mod:`~virtus.render.synthesis` -- all frames from the trace (sparse lookups, host).
 * :mod:`~virtus.render.synthesis_jit` -- the same with Dr.Jit gathers on the device
   (used with CUDA variants).
-* :mod:`~virtus.render.sensor` -- exposure and quantisation to 8/16-bit frames.
-* :mod:`~virtus.render.groundtruth` -- depth, points, normals, projector coordinates, masks.
 * :mod:`~virtus.render.reference` -- Mitsuba's own projector emitter, one render per frame
   (validation and benchmarks).
 """
 
 from virtus.render.backend import choose_variant
-from virtus.render.groundtruth import GroundTruth
 from virtus.render.pipeline import Rendering, render
-from virtus.render.sensor import Sensor
 from virtus.render.synthesis import synthesize
 from virtus.render.tracing import Trace, trace
 
 __all__ = [
-    "GroundTruth",
     "Rendering",
-    "Sensor",
     "Trace",
     "choose_variant",
     "render",

@@ -28,10 +28,13 @@ from typing import Any
 import numpy as np
 import scipy.sparse
 
+from virtus.checks import positive_int
 from virtus.errors import InputError
 from virtus.render.tracing import Trace
+from virtus.sensor import Lookup
 
-LOOKUPS = ("nearest", "bilinear")
+#: The projector pixel models (:class:`virtus.sensor.Lookup`).
+LOOKUPS = tuple(member.value for member in Lookup)
 #: Pixels per block of the sparse product: (block x frames) float32 fits in L2 cache.
 _BLOCK_PIXELS = 1 << 14
 
@@ -126,6 +129,8 @@ def synthesize(
     *,
     transform: Callable[[np.ndarray, np.ndarray, slice], np.ndarray] | None = None,
     dtype: Any = np.float32,
+    threads: int | None = None,
+    block_pixels: int = _BLOCK_PIXELS,
 ) -> np.ndarray:
     """Every frame of ``sequence`` from one trace.
 
@@ -144,6 +149,8 @@ def synthesize(
         and in no fixed order: a random transform (noise) must draw from generators derived
         from ``frames`` and ``pixels`` to stay deterministic.
     dtype : dtype of the result (that of ``transform``'s output).
+    threads : worker threads (default: the CPUs this process may use).
+    block_pixels : pixels per block of the sparse product (the result does not depend on it).
 
     Returns
     -------
@@ -152,6 +159,8 @@ def synthesize(
     """
     if lookup not in LOOKUPS:
         raise InputError("lookup", f"one of {LOOKUPS}", lookup)
+    threads = _threads() if threads is None else positive_int("threads", threads)
+    block_pixels = positive_int("block_pixels", block_pixels)
     n_frames = len(sequence.frames)
     if n_frames == 0:
         raise InputError("sequence", "at least one frame", "an empty sequence")
@@ -166,14 +175,21 @@ def synthesize(
     directions = [d for d in ("v", "h") if groups[d]]
     profiles = {d: _profiles(sequence, groups[d], lengths[d]) for d in directions}
     # Both directions' matrices are built at once (numpy releases the GIL).
-    with ThreadPoolExecutor(max_workers=min(2, _threads())) as pool:
+    with ThreadPoolExecutor(max_workers=min(2, threads)) as pool:
         matrices = dict(zip(directions, pool.map(
             lambda d: lookup_matrix(coordinates[d], trace.weight, lengths[d], lookup),
             directions,
         ), strict=True))  # fmt: skip
     for direction in directions:
         _fill_direction(
-            out, groups[direction], matrices[direction], profiles[direction], ambient, transform
+            out,
+            groups[direction],
+            matrices[direction],
+            profiles[direction],
+            ambient,
+            transform,
+            threads,
+            block_pixels,
         )
     if groups[None]:
         white = trace.direct
@@ -195,6 +211,8 @@ def _fill_direction(
     profiles: np.ndarray,
     ambient: np.ndarray | None,
     transform: Callable[[np.ndarray, np.ndarray, slice], np.ndarray],
+    threads: int,
+    block_pixels: int,
 ) -> None:
     """``out[rows] = transform((matrix @ profiles).T + ambient)``, by pixel blocks: the
     transposed (frames, pixels) write stays in cache (a whole-image transpose would cost
@@ -205,7 +223,7 @@ def _fill_direction(
     target = out[index[0] : index[-1] + 1] if np.all(np.diff(index) == 1) else None
 
     def block_of_frames(start: int) -> None:
-        stop = min(start + _BLOCK_PIXELS, n_pixels)
+        stop = min(start + block_pixels, n_pixels)
         block = (matrix[start:stop] @ profiles).T
         if ambient is not None:
             block = block + ambient[None, start:stop]
@@ -215,5 +233,5 @@ def _fill_direction(
         else:
             out[index, start:stop] = block
 
-    with ThreadPoolExecutor(max_workers=_threads()) as pool:
-        list(pool.map(block_of_frames, range(0, n_pixels, _BLOCK_PIXELS)))
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        list(pool.map(block_of_frames, range(0, n_pixels, block_pixels)))

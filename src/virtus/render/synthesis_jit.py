@@ -15,9 +15,9 @@ import numpy as np
 
 from virtus.errors import InputError
 from virtus.render.backend import mitsuba
-from virtus.render.sensor import Sensor
 from virtus.render.synthesis import LOOKUPS, frame_groups
 from virtus.render.tracing import Trace
+from virtus.sensor import Sensor
 
 
 def synthesize_digital(
@@ -26,10 +26,13 @@ def synthesize_digital(
     lookup: str,
     sensor: Sensor,
     exposure: float,
+    seed: int = 0,
 ) -> np.ndarray:
     """Digital frames (F, H, W) of ``sequence`` from ``trace``, synthesised with Dr.Jit in the
     variant that traced it; same result as :func:`virtus.render.synthesis.synthesize`
-    followed by ``sensor.digitize`` (up to float32 rounding at exact half levels).
+    followed by ``sensor.digitize`` (up to float32 rounding at exact half levels). A noisy
+    sensor digitises each frame on the host from the counter-based streams of ``seed``, so
+    its noise is the same as on the CPU path.
     """
     if lookup not in LOOKUPS:
         raise InputError("lookup", f"one of {LOOKUPS}", lookup)
@@ -45,6 +48,12 @@ def synthesize_digital(
     def finish(index: int, radiance: Any) -> None:
         if ambient is not None:
             radiance = radiance + ambient
+        if sensor.noisy:
+            host = np.asarray(radiance.numpy(), dtype=np.float32)[None, :]
+            out[index] = sensor.digitize(
+                host, exposure, seed=seed, frames=np.array([index]), pixels=slice(0, n_pixels)
+            )[0]
+            return
         digital = sensor.digitize_jit(radiance, exposure, dr)
         out[index] = (mi.UInt8(digital) if sensor.bit_depth == 8 else mi.UInt32(digital)).numpy()
 

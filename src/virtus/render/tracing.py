@@ -38,9 +38,9 @@ import numpy as np
 from virtus.checks import positive_int
 from virtus.devices import Rig
 from virtus.errors import InputError
+from virtus.groundtruth import GroundTruth
 from virtus.optics import Intrinsics
 from virtus.render.backend import mitsuba
-from virtus.render.groundtruth import GroundTruth
 from virtus.render.mitsuba_scene import check_in_front, scene_dict
 from virtus.scene import Scene
 from virtus.transforms import Pose

@@ -1,0 +1,153 @@
+"""The virtual scanner: one frozen value that says everything about how captures are made.
+
+A :class:`Scanner` holds the rig, the pattern sequence, the projector pixel model, the
+camera sensor and the render settings. ``scanner.capture(scene, cam2world=..., rng=...)``
+renders one pose into a :class:`virtus.capture.Capture`. Every job (capture, scan,
+calibrate, demo, turntable) takes a scanner; the command line builds it in one place
+(:func:`virtus.cli.options.build_scanner`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from virtus.capture import Capture, rendered_provenance
+from virtus.checks import positive_int
+from virtus.devices import Rig, default_rig
+from virtus.errors import InputError
+from virtus.patterns import PatternSequence, default_sequence
+from virtus.sensor import Lookup, Sensor, as_lookup, as_seed
+from virtus.transforms import Pose
+
+#: Largest supersample count (a 32 x 32 grid): beyond it a pose needs > 10 GB of samples
+#: at 960 x 960.
+MAX_SPP = 1024
+#: Largest number of camera rays per pose (pixels x spp): ~100 bytes each in the trace.
+MAX_RAYS = 1 << 27
+
+
+@dataclass(frozen=True)
+class Scanner:
+    """A camera-projector scanner that renders captures.
+
+    Parameters
+    ----------
+    rig : camera, projector and ``proj2cam`` (default: the paper's rig).
+    sequence : the projected patterns (default: the paper's 52 frames for the projector).
+    lookup : projector pixel model (:class:`virtus.sensor.Lookup`).
+    sensor : camera model (bit depth, exposure, noise).
+    spp : supersamples per camera pixel, a perfect square.
+    variant : Mitsuba variant (default: ``$VIRTUS_MITSUBA_VARIANT`` or automatic).
+    """
+
+    rig: Rig = field(default_factory=default_rig)
+    sequence: PatternSequence | None = None
+    lookup: Lookup = Lookup.nearest
+    sensor: Sensor = field(default_factory=Sensor)
+    spp: int = 4
+    variant: str | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.rig, Rig):
+            raise InputError("rig", "a virtus.devices.Rig", type(self.rig).__name__)
+        projector = self.rig.projector.intrinsics
+        if self.sequence is None:
+            object.__setattr__(
+                self, "sequence", default_sequence(projector.width, projector.height)
+            )
+        elif not isinstance(self.sequence, PatternSequence):
+            raise InputError("sequence", "a PatternSequence", type(self.sequence).__name__)
+        if (self.sequence.width, self.sequence.height) != (projector.width, projector.height):
+            raise InputError(
+                "sequence",
+                f"patterns for the rig's {projector.width}x{projector.height} px projector",
+                f"{self.sequence.width}x{self.sequence.height} px",
+            )
+        object.__setattr__(self, "lookup", as_lookup(self.lookup))
+        if not isinstance(self.sensor, Sensor):
+            raise InputError("sensor", "a virtus.sensor.Sensor", type(self.sensor).__name__)
+        spp = positive_int("spp", self.spp)
+        if spp > MAX_SPP:
+            raise InputError("spp", f"at most {MAX_SPP} supersamples per pixel", spp)
+        camera = self.rig.camera.intrinsics
+        if camera.width * camera.height * spp > MAX_RAYS:
+            raise InputError(
+                "spp",
+                f"camera pixels x spp <= {MAX_RAYS} rays per pose",
+                f"{camera.width} x {camera.height} x {spp}",
+            )
+        object.__setattr__(self, "spp", spp)
+
+    def with_(self, **changes: Any) -> Scanner:
+        """A copy with some fields replaced (checked again)."""
+        return replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready description (rig schema, sequence, pixel model, sensor, settings)."""
+        return {
+            "rig": self.rig.to_dict(),
+            "sequence": self.sequence.to_dict(),  # type: ignore[union-attr]
+            "lookup": self.lookup.value,
+            "sensor": self.sensor.to_dict(),
+            "spp": self.spp,
+            "variant": self.variant,
+        }
+
+    def capture(
+        self,
+        scene: Any,
+        *,
+        cam2world: Pose | None = None,
+        rng: np.random.Generator | int | None = None,
+        command: list[str] | None = None,
+        threads: int | None = None,
+        block_pixels: int | None = None,
+    ) -> Capture:
+        """Render one pose of the scanner in ``scene``.
+
+        Parameters
+        ----------
+        scene : a :class:`virtus.scene.Scene` (world frame = camera frame unless
+            ``cam2world`` places the camera).
+        cam2world : camera pose in the scene's world frame (default identity).
+        rng : seed of the sensor's counter-based noise streams (int, Generator or None = 0).
+        command : command line recorded in the provenance (default ``sys.argv``).
+        threads, block_pixels : host synthesis parallelism (the frames do not depend on it).
+
+        Returns
+        -------
+        A :class:`Capture` with frames, ground truth, scene and settings.
+        """
+        from virtus.render import render
+
+        seed = as_seed(rng)
+        pose = Pose.identity() if cam2world is None else cam2world
+        rendering = render(
+            self.rig,
+            scene,
+            self.sequence,
+            spp=self.spp,
+            lookup=self.lookup.value,
+            variant=self.variant,
+            rng=seed,
+            cam2world=pose,
+            sensor=self.sensor,
+            threads=threads,
+            block_pixels=block_pixels,
+        )
+        return Capture(
+            sequence=self.sequence,  # type: ignore[arg-type]
+            rig=self.rig,
+            frame_data=rendering.frames,
+            cam2world=pose,
+            bit_depth=self.sensor.bit_depth,
+            sensor=self.sensor,
+            seed=seed,
+            scene=scene,
+            gt_data=rendering.gt,
+            render=rendering.metadata(),
+            provenance=rendered_provenance(command),
+        )
