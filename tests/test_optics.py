@@ -218,6 +218,8 @@ def test_inverse_camera_model_of_the_default_projector():
         ({"height": 10.5}, "height"),
         ({"dist": (0.1, 0.2, 0.3)}, "dist"),
         ({"dist": (0.1, float("nan"), 0.0, 0.0)}, "dist"),
+        ({"fx": 10**400}, "fx"),
+        ({"cy": float("inf")}, "cy"),
     ],
 )
 def test_bad_intrinsics_name_the_argument(kwargs, name):
@@ -252,3 +254,62 @@ def test_devices_expose_their_size():
     rig = Rig(Camera(REALISTIC), Projector(RATIONAL), Pose.identity())
     assert (rig.camera.width, rig.projector.height) == (960, 1140)
     assert rig.baseline_m == 0.0
+
+
+# -- rig files: misspelt keys and garbage -------------------------------------------------------
+
+
+def test_misspelt_device_and_pose_keys_are_refused_by_name():
+    data = default_rig().to_dict()
+    data["camera"]["distortion"] = data["camera"].pop("dist")
+    with pytest.raises(InputError) as error:
+        Rig.from_dict(data)
+    assert str(error.value) == (
+        "camera: expected only the keys width, height, K, dist, "
+        "got \"unknown key 'distortion' (did you mean 'dist'?)\""
+    )
+    data = default_rig().to_dict()
+    data["projector"]["k"] = data["projector"].pop("K")
+    with pytest.raises(InputError, match=r"^projector: .*unknown key 'k' \(did you mean 'K'\?\)"):
+        Rig.from_dict(data)
+    data = default_rig().to_dict()
+    data["proj2cam"]["T"] = data["proj2cam"].pop("t")
+    with pytest.raises(InputError, match=r"^proj2cam: .*unknown key 'T' \(did you mean 't'\?\)"):
+        Rig.from_dict(data)
+    data = default_rig().to_dict()
+    data["projecter"] = data.pop("projector")
+    with pytest.raises(InputError, match=r"^rig: .*missing 'projector' \(is 'projecter' misspelt"):
+        Rig.from_dict(data)
+    with pytest.raises(InputError, match=r"^proj2cam: expected an object with the keys R, t"):
+        Rig.from_dict({**default_rig().to_dict(), "proj2cam": [[1, 0, 0]]})
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("[1, 2, 3]", r"expected a JSON object, got 'a JSON array'"),
+        ('{"camera": {"fx": NaN}}', r"expected finite numbers \(JSON has no NaN"),
+        ('{"units": "m",\n "camera": }', r"expected valid JSON, got 'Expecting value at line 2"),
+        ("[" * 50_000, r"expected JSON nested at most 64 deep"),
+    ],
+    ids=["list", "nan", "syntax", "deep"],
+)
+def test_malformed_rig_files_give_one_line(tmp_path, text, message):
+    path = tmp_path / "rig.json"
+    path.write_text(text)
+    with pytest.raises(InputError, match=rf"^rig .*rig\.json: {message}") as error:
+        Rig.load_json(path)
+    assert "\n" not in str(error.value)
+    path.write_bytes(b"\x93NUMPY\x01\x00")
+    with pytest.raises(InputError, match=r"^rig .*rig\.json: expected UTF-8 text"):
+        Rig.load_json(path)
+    with pytest.raises(InputError, match=r"^rig: expected an existing JSON file"):
+        Rig.load_json(tmp_path / "missing.json")
+
+
+def test_absurd_image_sizes_are_refused_before_allocating():
+    with pytest.raises(InputError, match=r"^width: expected at most 32768 pixels, got '100000'"):
+        Intrinsics(1e5, 1e5, 5e4, 5e4, 100_000, 100_000)
+    with pytest.raises(InputError, match=r"^width x height: expected at most 268,435,456 pixels"):
+        Intrinsics(1e4, 1e4, 10000.0, 10000.0, 20_000, 20_000)
+    assert Intrinsics(1e4, 1e4, 5000.0, 100.0, 32768, 200).width == 32768

@@ -99,5 +99,61 @@ def test_bad_arguments(tmp_path: Path) -> None:
         write_ply(tmp_path / "x.ply", np.zeros((2, 3)), normals=np.zeros((1, 3)))
     with pytest.raises(InputError, match="dtype"):
         write_ply(tmp_path / "x.ply", np.zeros((1, 3)), dtype=np.int32)
-    with pytest.raises(FileNotFoundError):
+    with pytest.raises(InputError, match=r"^point cloud: expected an existing PLY file"):
         read_ply(tmp_path / "missing.ply")
+
+
+_XYZ = b"property float x\nproperty float y\nproperty float z\n"
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        (b"ply\nformat binary_little_endian 1.0\nelement vertex -5\n" + _XYZ + b"end_header\n",
+         r"negative element count in 'element vertex -5'"),
+        (b"ply\nformat ascii 1.0\nelement vertex -1\n" + _XYZ + b"end_header\n",
+         "negative element count"),
+        # 10^15 vertices announced over 12 bytes: refused before allocating or walking them
+        (b"ply\nformat binary_little_endian 1.0\nelement vertex 1000000000000000\n" + _XYZ
+         + b"end_header\n" + bytes(12),
+         r"truncated \(1000000000000000 vertex records of at least 12 bytes, 12 bytes left\)"),
+        # a face element before the vertices announcing more records than bytes left
+        (b"ply\nformat binary_little_endian 1.0\nelement face 1000000000000\n"
+         b"property list uchar int vertex_indices\nelement vertex 1\n" + _XYZ
+         + b"end_header\n" + bytes(12),
+         r"truncated \(1000000000000 face records"),
+        # negative list lengths (signed count type) would walk backwards forever
+        (b"ply\nformat binary_little_endian 1.0\nelement face 3\n"
+         b"property list char uchar vertex_indices\nelement vertex 1\n" + _XYZ
+         + b"end_header\n" + b"\xff" * 3 + bytes(12),
+         r"negative list length in property 'vertex_indices'"),
+        (b"ply\nformat ascii 1.0\nelement vertex 1000000\n" + _XYZ + b"end_header\n0 0 0\n",
+         r"truncated"),
+        (b"ply\nformat ascii 1.0\ncomment caf\xe9\nelement vertex 0\n" + _XYZ
+         + b"end_header\n", r"header is not UTF-8 text"),
+        (b"ply\nformat ascii 1.0\nelement vertex 2\n" + _XYZ + b"end_header\n0 0 1\nnan 0 1\n",
+         r"1 of 2 points have non-finite coordinates \(first: vertex 1\)"),
+    ],
+    ids=["negative", "negative-ascii", "absurd", "absurd-faces", "negative-list", "ascii-short",
+         "non-utf8", "nan"],
+)  # fmt: skip
+def test_garbage_headers_and_bodies_are_refused(
+    tmp_path: Path, content: bytes, message: str
+) -> None:
+    path = tmp_path / "bad.ply"
+    path.write_bytes(content)
+    with pytest.raises(PlyError, match=message) as error:
+        read_ply(path)
+    assert isinstance(error.value, ValueError) and "\n" not in str(error.value)
+
+
+def test_utf8_comments_are_read_and_size_is_bounded(tmp_path: Path, monkeypatch) -> None:
+    with pytest.raises(InputError, match="comments: expected single-line ASCII strings"):
+        write_ply(tmp_path / "c.ply", np.zeros((4, 3)), comments=("scanned at 20 °C",))
+    # other writers put UTF-8 in comments: read them
+    path = write_ply(tmp_path / "c.ply", np.zeros((4, 3)), comments=("scanned at 20 C",))
+    path.write_bytes(path.read_bytes().replace(b"20 C", "20 °C".encode()))
+    assert "scanned at 20 °C" in read_ply(path).comments
+    monkeypatch.setattr("virtus.ply.MAX_CLOUD_BYTES", 100)
+    with pytest.raises(InputError, match=r"^point cloud .*c\.ply: expected a PLY file of at most"):
+        read_ply(path)

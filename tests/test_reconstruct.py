@@ -86,6 +86,41 @@ def test_point_behind_the_devices_is_nan() -> None:
     assert np.isnan(out).all()
 
 
+def _seen_from_behind(rig: Rig, point_cam: np.ndarray, behind: str) -> tuple[np.ndarray, ...]:
+    """The correspondence of a point that lies behind one device (camera or projector).
+
+    That device's pixel is the one of the point mirrored through its centre: the same line
+    of sight, so the two rays (or the ray and the projector's plane) meet exactly at the
+    point, which is where triangulation must refuse to put it.
+    """
+    point_proj = rig.cam2proj.apply(point_cam[None])[0]
+    assert (point_cam[2] < 0) == (behind == "camera") and (point_proj[2] < 0) == (
+        behind == "projector"
+    )
+    cam_px = rig.camera.intrinsics.project(np.sign(point_cam[2]) * point_cam[None])
+    proj_uv = rig.projector.intrinsics.project(np.sign(point_proj[2]) * point_proj[None])
+    return cam_px, proj_uv
+
+
+@pytest.mark.parametrize("use", ["uv", "u", "v"])
+def test_points_behind_either_device_are_nan(use: str) -> None:
+    # Pinhole devices: far off-axis lines of sight stay exactly invertible (with distortion
+    # they would be NaN for another reason, an undistortion that does not converge).
+    rig = default_rig()
+    # (3, 0, 0.2) m in the projector frame lies behind the camera's centre plane; (-3, 0, 0.2)
+    # m in the camera frame lies behind the projector's (toe-in: its axis turns towards +x).
+    behind_camera = rig.proj2cam.apply(np.array([[3.0, 0.0, 0.2]]))[0]
+    behind_projector = np.array([-3.0, 0.0, 0.2])
+    in_front = np.array([0.05, -0.03, 0.9])
+    for point, behind in ((behind_camera, "camera"), (behind_projector, "projector")):
+        cam_px, proj_uv = _seen_from_behind(rig, point, behind)
+        assert np.isnan(triangulate(rig, cam_px, proj_uv, use=use)).all(), behind
+    # The control: the same construction for a visible point gives it back.
+    cam_px, proj_uv = _correspondences(rig, in_front[None])
+    np.testing.assert_allclose(triangulate(rig, cam_px, proj_uv, use=use)[0], in_front,
+                               atol=TRIANGULATION_M)  # fmt: skip
+
+
 def test_image_functions_on_a_plane() -> None:
     """A fronto-parallel plane at 0.9 m: depth map is 0.9 everywhere it is lit."""
     full = _distorted_rig()

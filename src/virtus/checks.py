@@ -27,18 +27,23 @@ def as_float_array(
     """
     try:
         array = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # OverflowError: an int beyond float64
         raise InputError(name, "a numeric array", value) from None
     if shape is not None:
-        if array.ndim != len(shape) or any(
-            want is not None and have != want for have, want in zip(array.shape, shape, strict=True)
-        ):
-            want_text = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
-            raise InputError(name, f"an array of shape {want_text}", f"shape {array.shape}")
+        check_shape(name, array.shape, shape)
     bad = np.isinf(array) if allow_nan else ~np.isfinite(array)
     if bad.any():
         raise InputError(name, "finite values", f"{int(bad.sum())} non-finite entries")
     return array
+
+
+def check_shape(name: str, have: tuple[int, ...], shape: Sequence[int | None]) -> None:
+    """Raise :class:`InputError` unless ``have`` matches ``shape`` (``None`` = any length)."""
+    if len(have) != len(shape) or any(
+        want is not None and got != want for got, want in zip(have, shape, strict=True)
+    ):
+        want_text = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+        raise InputError(name, f"an array of shape {want_text}", f"shape {have}")
 
 
 def as_points(name: str, value: object, dim: int, *, allow_nan: bool = False) -> np.ndarray:
@@ -58,6 +63,8 @@ def finite(name: str, value: object) -> float:
     """Return ``value`` as a finite float."""
     try:
         number = float(value)  # type: ignore[arg-type]
+    except OverflowError:  # an int beyond float64
+        raise InputError(name, "a finite number", value) from None
     except (TypeError, ValueError):
         raise InputError(name, "a number", value) from None
     if not np.isfinite(number):

@@ -7,7 +7,6 @@ the camera frame: ``X_cam = R X_proj + t``.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,7 +20,13 @@ from virtus.errors import InputError
 from virtus.isaac import intrinsics_from_isaac, isaac_params
 from virtus.jsonio import write_json
 from virtus.optics import Intrinsics
+from virtus.safeio import check_keys, closest_key, read_json
 from virtus.transforms import Pose, check_rotation
+
+#: Keys the rig schema requires at its top level (DESIGN.md section 3).
+_RIG_KEYS = ("camera", "projector", "proj2cam")
+#: Keys of the ``proj2cam`` object.
+_POSE_KEYS = ("R", "t")
 
 
 @dataclass(frozen=True)
@@ -91,15 +96,31 @@ class Rig:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Rig:
-        """Read the rig schema; extra keys (errors, residuals, ...) are ignored."""
+        """Read the rig schema (DESIGN.md section 3).
+
+        Extra keys at the top level are accepted and ignored: calibration results and
+        captures add their own fields (errors, residuals, sequence, ...) beside the rig's.
+        Inside ``camera``, ``projector`` and ``proj2cam`` only the schema's keys are
+        accepted, so a misspelt key (``distortion`` for ``dist``) is an error naming it
+        rather than a silently ignored lens model.
+        """
         if not isinstance(data, Mapping):
             raise InputError("rig", "a JSON object", type(data).__name__)
-        missing = [key for key in ("camera", "projector", "proj2cam") if key not in data]
+        missing = [key for key in _RIG_KEYS if key not in data]
         if missing:
-            raise InputError("rig", "keys camera, projector, proj2cam", f"missing {missing}")
+            found = [str(key) for key in data]
+            hints = [
+                f"{key!r}"
+                + (f" (is {near!r} misspelt?)" if (near := closest_key(key, found)) else "")
+                for key in missing
+            ]
+            raise InputError(
+                "rig", "keys camera, projector, proj2cam", f"missing {', '.join(hints)}"
+            )
         units = data.get("units", "m")
         if units != "m":
             raise InputError("rig.units", '"m" (translations in metres)', units)
+        check_keys(data["proj2cam"], _POSE_KEYS, "proj2cam")
         return cls(
             Camera(Intrinsics.from_dict(data["camera"], "camera")),
             Projector(Intrinsics.from_dict(data["projector"], "projector")),
@@ -112,13 +133,12 @@ class Rig:
 
     @classmethod
     def load_json(cls, path: str | Path) -> Rig:
-        """Read a rig (or a calibration file using the rig schema) from JSON."""
-        path = Path(path)
-        try:
-            data = json.loads(path.read_text())
-        except json.JSONDecodeError as error:
-            raise InputError(str(path), "a JSON file", f"invalid JSON ({error.msg})") from None
-        return cls.from_dict(data)
+        """Read a rig (or a calibration file using the rig schema) from JSON.
+
+        The file is read through :func:`virtus.safeio.read_json` (size, UTF-8, depth and
+        syntax checked; NaN refused) and must hold a JSON object; see :meth:`from_dict`.
+        """
+        return cls.from_dict(read_json(path, "rig", expect=dict))
 
 
 def projected_size(

@@ -1,4 +1,10 @@
-"""JSON files written one way: numpy values and paths serialised, the file replaced atomically."""
+"""JSON files written one way: numpy values and paths serialised, the file replaced atomically.
+
+Reading is the other half and lives in :mod:`virtus.safeio` (:func:`~virtus.safeio.read_json`:
+size, UTF-8, depth and syntax checked). Non-finite floats are written as the ``NaN`` /
+``Infinity`` literals Python's ``json`` uses; ``read_json`` refuses them unless called with
+``allow_nan=True`` (reports may hold NaN statistics; configuration files never do).
+"""
 
 from __future__ import annotations
 

@@ -23,7 +23,17 @@ import numpy as np
 
 from virtus.checks import as_float_array, as_points, finite, positive, positive_int
 from virtus.errors import InputError
+from virtus.safeio import check_keys
 
+#: Largest image side accepted, pixels: 4x the widest machine-vision sensors (about 8k px);
+#: a larger side is a mistake, not a device.
+MAX_IMAGE_SIDE_PX = 32768
+#: Most pixels accepted (width x height), 2**28 = 268 Mpx (a 16384 x 16384 image): a
+#: float64 (H, W, 3) ray map of it takes 6.4 GB, so the bound is checked up front instead
+#: of failing with MemoryError after allocating.
+MAX_IMAGE_PIXELS = 2**28
+#: Keys of an intrinsics object in the rig JSON (DESIGN.md section 3).
+_DICT_KEYS = ("width", "height", "K", "dist")
 #: Allowed numbers of distortion coefficients (OpenCV: 4, 5 or 8; 0 = none).
 _DIST_LENGTHS = (0, 4, 5, 8)
 #: Newton iterations for undistortion; realistic lenses converge in 3-5.
@@ -41,7 +51,8 @@ class Intrinsics:
     fx, fy : focal lengths in pixels (> 0).
     cx, cy : principal point in pixels, pixel-centre convention ((0, 0) = centre of the
         top-left pixel; the image centre is ``((width - 1) / 2, (height - 1) / 2)``).
-    width, height : image size in pixels.
+    width, height : image size in pixels, each at most :data:`MAX_IMAGE_SIDE_PX` and
+        together at most :data:`MAX_IMAGE_PIXELS` pixels.
     dist : distortion coefficients in OpenCV order ``(k1, k2, p1, p2[, k3[, k4, k5, k6]])``;
         empty for an ideal pinhole.
     """
@@ -61,6 +72,17 @@ class Intrinsics:
         object.__setattr__(self, "cy", finite("cy", self.cy))
         object.__setattr__(self, "width", positive_int("width", self.width))
         object.__setattr__(self, "height", positive_int("height", self.height))
+        for name in ("width", "height"):
+            if getattr(self, name) > MAX_IMAGE_SIDE_PX:
+                raise InputError(
+                    name, f"at most {MAX_IMAGE_SIDE_PX} pixels", f"{getattr(self, name)}"
+                )
+        if self.width * self.height > MAX_IMAGE_PIXELS:
+            raise InputError(
+                "width x height",
+                f"at most {MAX_IMAGE_PIXELS:,} pixels (2**28)",
+                f"{self.width} x {self.height} = {self.width * self.height:,}",
+            )
         dist = as_float_array("dist", self.dist).ravel()
         if dist.size not in _DIST_LENGTHS:
             raise InputError("dist", "0, 4, 5 or 8 OpenCV coefficients", f"{dist.size}")
@@ -126,9 +148,14 @@ class Intrinsics:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], name: str = "intrinsics") -> Intrinsics:
-        """Inverse of :meth:`to_dict`; ``name`` prefixes error messages (e.g. ``camera``)."""
+        """Inverse of :meth:`to_dict`; ``name`` prefixes error messages (e.g. ``camera``).
+
+        Keys other than ``width``, ``height``, ``K`` and ``dist`` are refused (a misspelt
+        ``distortion`` would otherwise drop the lens model silently).
+        """
         if not isinstance(data, Mapping):
             raise InputError(name, "an object with width, height, K, dist", data)
+        check_keys(data, _DICT_KEYS, name)
         missing = [key for key in ("width", "height", "K") if key not in data]
         if missing:
             raise InputError(name, "keys width, height, K (optionally dist)", f"missing {missing}")

@@ -6,6 +6,11 @@ properties are ``x y z`` (float32 or float64), optionally ``nx ny nz`` (float32)
 frame (``comment frame camera``), so any PLY viewer opens the file and a reader knows its
 units. :func:`read_ply` reads such files back, and vertex data of other PLY files
 (ascii or binary, either endianness; faces and other elements are skipped).
+
+:func:`read_ply` trusts nothing in the file: the size is bounded before reading
+(:data:`MAX_CLOUD_BYTES`), the header must be UTF-8, every element count must be
+non-negative and fit in the bytes that follow (checked before anything is allocated), a
+truncated body is refused, and points must be finite.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ import numpy as np
 
 from virtus.checks import as_float_array, as_points
 from virtus.errors import InputError, VirtusError
+from virtus.safeio import check_file
 
 __all__ = ["PlyError", "PointCloud", "read_ply", "write_ply"]
 
@@ -28,10 +34,13 @@ _PLY_TYPES = {
     "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
 }  # fmt: skip
 _FORMATS = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": None}
+#: Largest PLY file read (bytes): it is read whole. 2 GiB hold a merged scan of 70 million
+#: points with normals and colours (27 bytes each).
+MAX_CLOUD_BYTES = 2 * 2**30
 
 
-class PlyError(VirtusError):
-    """A file is not a readable PLY point cloud."""
+class PlyError(VirtusError, ValueError):
+    """A file is not a readable PLY point cloud (bad input: also a ``ValueError``)."""
 
 
 @dataclass(frozen=True)
@@ -81,7 +90,7 @@ def write_ply(
         range are an error, not clipped.
     dtype : float32 (default, ~0.1 um resolution at 1 m) or float64 for the coordinates.
     frame : name of the points' frame, written as ``comment frame <name>``.
-    comments : extra header comments (one line each).
+    comments : extra header comments (one ASCII line each).
 
     Returns
     -------
@@ -109,8 +118,8 @@ def write_ply(
         fields += [(name, "u1") for name in ("red", "green", "blue")]
         columns += [col[:, 0], col[:, 1], col[:, 2]]
     for line in (*comments, frame or ""):
-        if "\n" in line or "\r" in line:
-            raise InputError("comments", "single-line strings", line)
+        if "\n" in line or "\r" in line or not line.isascii():
+            raise InputError("comments", "single-line ASCII strings (PLY headers are ASCII)", line)
 
     record = np.dtype(fields)
     data = np.empty(n, dtype=record)
@@ -149,14 +158,18 @@ def read_ply(path: str | os.PathLike[str]) -> PointCloud:
 
     Raises
     ------
+    InputError
+        The file does not exist, cannot be read, or is larger than :data:`MAX_CLOUD_BYTES`.
     PlyError
-        The file is not a PLY file, is truncated, or has no ``vertex`` element with x, y, z.
-    OSError
-        The file cannot be opened.
+        The file is not a PLY file, its header is not UTF-8 or announces a negative or
+        impossible element count, it is truncated, it has no ``vertex`` element with x, y, z,
+        or a point is not finite.
     """
-    source = Path(path)
-    with open(source, "rb") as stream:
-        raw = stream.read()
+    source = check_file(path, "point cloud", max_bytes=MAX_CLOUD_BYTES, kind="PLY file")
+    try:
+        raw = source.read_bytes()
+    except OSError as error:
+        raise InputError(f"point cloud {source}", "a readable file", error.strerror) from None
     if not raw:
         raise PlyError(f"{source}: empty file (0 bytes), not a PLY file")
     if not raw.startswith(b"ply\n") and not raw.startswith(b"ply\r\n"):
@@ -165,7 +178,12 @@ def read_ply(path: str | os.PathLike[str]) -> PointCloud:
     if end < 0:
         raise PlyError(f"{source}: PLY header has no 'end_header'")
     body_start = raw.index(b"\n", end) + 1 if b"\n" in raw[end:] else len(raw)
-    header_lines = raw[:end].decode("ascii", errors="replace").splitlines()
+    try:
+        header_lines = raw[:end].decode("utf-8").splitlines()
+    except UnicodeDecodeError as error:
+        raise PlyError(
+            f"{source}: PLY header is not UTF-8 text (byte at offset {error.start})"
+        ) from None
 
     fmt: str | None = None
     comments: list[str] = []
@@ -184,6 +202,8 @@ def read_ply(path: str | os.PathLike[str]) -> PointCloud:
                 count = int(words[2])
             except ValueError:
                 raise PlyError(f"{source}: bad element line {line!r}") from None
+            if count < 0:
+                raise PlyError(f"{source}: negative element count in {line.strip()!r}")
             elements.append((words[1], count, []))
         elif key == "property" and elements:
             if len(words) == 5 and words[1] == "list":
@@ -222,6 +242,12 @@ def read_ply(path: str | os.PathLike[str]) -> PointCloud:
         elif len(words) >= 2 and words[0] == "frame":
             frame = " ".join(words[1:])
     points = np.stack([vertices[a].astype(np.float64) for a in "xyz"], axis=1)
+    bad = ~np.isfinite(points).all(axis=1)
+    if bad.any():
+        raise PlyError(
+            f"{source}: {int(bad.sum())} of {len(points)} points have non-finite coordinates "
+            f"(first: vertex {int(np.flatnonzero(bad)[0])})"
+        )
     normals = None
     if {"nx", "ny", "nz"} <= set(names):
         normals = np.stack([vertices[a].astype(np.float64) for a in ("nx", "ny", "nz")], axis=1)
@@ -232,24 +258,28 @@ def read_ply(path: str | os.PathLike[str]) -> PointCloud:
 
 
 def _read_binary_vertices(source, body, elements, vertex_index, order):
+    """The vertex records of a binary body (a view of ``body``, nothing copied)."""
     offset = 0
-    for index, (name, count, props) in enumerate(elements):
-        if any(p[1] is not None for p in props):
-            if index < vertex_index:
-                # A list property before the vertices: walk it record by record.
-                offset = _skip_binary_lists(source, body, offset, count, props, order)
-                continue
-            if index > vertex_index:
-                break
-            raise PlyError(f"{source}: list properties in the vertex element are not supported")
-        record = np.dtype([(p[0], order + _PLY_TYPES[p[2]]) for p in props])
-        size = record.itemsize * count
-        if offset + size > len(body):
-            raise PlyError(f"{source}: PLY file is truncated ({name} data incomplete)")
+    for index, (name, count, props) in enumerate(elements[: vertex_index + 1]):
+        # Each record takes at least this many bytes (a list at least its length field):
+        # refuse a count the rest of the file cannot hold before walking or allocating it.
+        least = sum(np.dtype(_PLY_TYPES[p[1] or p[2]]).itemsize for p in props)
+        if least * count > len(body) - offset:
+            raise PlyError(
+                f"{source}: PLY file is truncated ({count} {name} records of at least "
+                f"{least} bytes, {len(body) - offset} bytes left)"
+            )
         if index == vertex_index:
-            return np.frombuffer(body, dtype=record, count=count, offset=offset)
-        offset += size
-    raise PlyError(f"{source}: PLY vertex element not found")  # pragma: no cover
+            break
+        if any(p[1] is not None for p in props):  # list properties: walk record by record
+            offset = _skip_binary_lists(source, body, offset, count, props, order)
+        else:
+            offset += least * count
+    name, count, props = elements[vertex_index]
+    if any(p[1] is not None for p in props):
+        raise PlyError(f"{source}: list properties in the vertex element are not supported")
+    record = np.dtype([(p[0], order + _PLY_TYPES[p[2]]) for p in props])
+    return np.frombuffer(body, dtype=record, count=count, offset=offset)
 
 
 def _skip_binary_lists(source, body, offset, count, props, order):
@@ -262,7 +292,11 @@ def _skip_binary_lists(source, body, offset, count, props, order):
             if offset + ctype.itemsize > len(body):
                 raise PlyError(f"{source}: PLY file is truncated")
             length = int(np.frombuffer(body, dtype=ctype, count=1, offset=offset)[0])
+            if length < 0:
+                raise PlyError(f"{source}: negative list length in property {_name!r}")
             offset += ctype.itemsize + length * np.dtype(_PLY_TYPES[value_type]).itemsize
+        if offset > len(body):
+            raise PlyError(f"{source}: PLY file is truncated")
     return offset
 
 

@@ -77,8 +77,9 @@ def triangulate(
     Returns
     -------
     (N, 3) float64, points in the camera frame in metres; NaN rows where the needed
-    projector coordinates are NaN, the rays are parallel, or the point would lie behind
-    the camera or the projector.
+    projector coordinates are NaN, the rays are parallel, or the point is not in front of
+    both devices: ``z <= 0`` in the camera frame or in the projector frame (a wrong
+    correspondence or calibration, never a surface either device can see).
     """
     cam = as_points("cam_px", cam_px, 2)
     proj = as_points("proj_uv", proj_uv, 2, allow_nan=True)
@@ -100,6 +101,7 @@ def triangulate(
         axis = 0 if use == "u" else 1
         out = _ray_surface(rig, rays_cam, proj[valid, axis], axis)
     points[valid] = out
+    points[~_in_front(rig, points)] = np.nan
     return points
 
 
@@ -121,7 +123,9 @@ def points_from_decoded(
 
     Returns
     -------
-    (H, W, 3) float64 point map in the camera frame, metres; NaN where invalid.
+    (H, W, 3) float64 point map in the camera frame, metres; NaN where invalid, including
+    points behind the camera or the projector (``z <= 0`` in either frame; see
+    :func:`triangulate`).
     """
     intr = rig.camera.intrinsics
     uv = as_float_array("proj_uv", proj_uv, (intr.height, intr.width, 2), allow_nan=True)
@@ -238,6 +242,14 @@ def depth_edge_mask(point_map: object, focal_px: float, max_step: float = 20.0) 
 # --- internals -----------------------------------------------------------------------------
 
 
+def _in_front(rig: Rig, points_cam: np.ndarray) -> np.ndarray:
+    """(N,) bool: finite points with ``z > 0`` in both the camera and the projector frame."""
+    cam2proj = rig.cam2proj
+    z_proj = points_cam @ cam2proj.R[2] + cam2proj.t[2]
+    with np.errstate(invalid="ignore"):
+        return (points_cam[:, 2] > 0) & (z_proj > 0)
+
+
 def _as_mask(mask: object, shape: tuple[int, ...]) -> np.ndarray:
     array = np.asarray(mask)
     if array.dtype != bool or array.shape != shape:
@@ -301,8 +313,6 @@ def _ray_surface(rig: Rig, rays_cam: np.ndarray, coord: np.ndarray, axis: int) -
         s = _newton_depth(proj_intr, cam2proj, rays_cam, coord, axis, np.where(bad, np.nan, s))
         bad |= ~(s > 0)
     points = s[:, None] * rays_cam
-    in_proj = cam2proj.apply(np.where(bad[:, None], 0.0, points))
-    bad |= in_proj[:, 2] <= 0
     points[bad] = np.nan
     return points
 

@@ -12,6 +12,13 @@ it into a Mitsuba scene. Conventions:
   albedo 1, facing it at 1 m on its axis, a radiance of 1. ``Scene.ambient`` is the level of a
   uniform ambient light in the same units (ambient radiance = ambient x diffuse albedo).
 
+Bounds (each refusal is an :class:`~virtus.errors.InputError` naming the key or file):
+every number finite; lengths (radii, sizes, centres, translations, mesh vertices in the
+world) within :data:`MAX_LENGTH_M`; the YAML file read through :mod:`virtus.safeio`
+(size, UTF-8, aliases, depth); mesh files at most :data:`MAX_MESH_BYTES`, with finite
+vertices, valid face indices, no degenerate (zero-area) faces; textures at most
+:data:`MAX_TEXTURE_BYTES`.
+
 YAML example (unknown keys are rejected with an error naming the key)::
 
     ambient: 0.02
@@ -49,8 +56,23 @@ from pydantic import (
 )
 
 from virtus.errors import InputError, VirtusError
+from virtus.safeio import check_file, load_npy, read_yaml
 from virtus.transforms import Pose
 
+#: Largest length or coordinate a scene may hold, metres (1 km). Bench FPP scenes span
+#: metres; Mitsuba traces in float32, whose spacing at 1 km is already 0.06 mm, so larger
+#: values (a sphere of radius 1e300, a size in millimetres given as metres x 1e6) are
+#: mistakes that would render as garbage.
+MAX_LENGTH_M = 1000.0
+#: Largest ambient level, relative to the projector's white: 1000x drowns the fringes by
+#: three orders of magnitude; larger values are mistakes.
+MAX_AMBIENT = 1000.0
+#: Largest mesh file read (bytes): a 10-million-face binary STL is 500 MB; trimesh needs
+#: several times the file size in memory.
+MAX_MESH_BYTES = 512 * 2**20
+#: Largest texture file read (bytes), images and .npy alike: 1 GiB holds an 11k x 11k
+#: float64 texture; boards and albedo maps need a few thousand pixels across.
+MAX_TEXTURE_BYTES = 2**30
 #: File suffixes trimesh reads for :class:`MeshObject`.
 MESH_SUFFIXES = (".stl", ".obj", ".ply")
 #: Image suffixes accepted as textures (read with OpenCV) besides ``.npy`` float arrays.
@@ -66,6 +88,10 @@ _NO_ASSET_DIR = (
 )
 
 __all__ = [
+    "MAX_AMBIENT",
+    "MAX_LENGTH_M",
+    "MAX_MESH_BYTES",
+    "MAX_TEXTURE_BYTES",
     "BoxObject",
     "Material",
     "MeshObject",
@@ -121,7 +147,9 @@ def _prefix(class_name: str) -> str:
 class _Model(BaseModel):
     """Frozen pydantic model whose validation errors are :class:`InputError` lines."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, arbitrary_types_allowed=True)
+    model_config = ConfigDict(
+        extra="forbid", frozen=True, arbitrary_types_allowed=True, allow_inf_nan=False
+    )
     #: Field names that may be given positionally, in order.
     _positional: ClassVar[tuple[str, ...]] = ()
 
@@ -143,7 +171,15 @@ class _Model(BaseModel):
 
 
 def _as_pose(value: Any) -> Pose:
-    """Accept a Pose, ``{R, t}``, ``{euler_deg, t[, seq]}`` or a 4x4 matrix."""
+    """Accept a Pose, ``{R, t}``, ``{euler_deg, t[, seq]}`` or a 4x4 matrix; the translation
+    must lie within :data:`MAX_LENGTH_M`."""
+    pose = _parse_pose(value)
+    if np.abs(pose.t).max() > MAX_LENGTH_M:
+        raise InputError("pose.t", f"coordinates within +-{MAX_LENGTH_M:g} m", pose.t.tolist())
+    return pose
+
+
+def _parse_pose(value: Any) -> Pose:
     if isinstance(value, Pose):
         return value
     if isinstance(value, Mapping):
@@ -166,11 +202,18 @@ def _as_pose(value: Any) -> Pose:
 
 
 def _as_vector(name: str, value: Any, length: int, *, positive_entries: bool) -> tuple:
-    array = np.asarray(value, dtype=np.float64) if not isinstance(value, str) else None
+    """``length`` finite lengths in metres, each within :data:`MAX_LENGTH_M` (and > 0 when
+    ``positive_entries``)."""
+    try:
+        array = np.asarray(value, dtype=np.float64) if not isinstance(value, str) else None
+    except (TypeError, ValueError, OverflowError):
+        array = None
     if array is None or array.shape != (length,) or not np.all(np.isfinite(array)):
         raise InputError(name, f"{length} finite numbers", value)
     if positive_entries and np.any(array <= 0):
         raise InputError(name, f"{length} positive numbers (metres)", value)
+    if np.any(np.abs(array) > MAX_LENGTH_M):
+        raise InputError(name, f"lengths within {MAX_LENGTH_M:g} m", value)
     return tuple(float(x) for x in array)
 
 
@@ -206,11 +249,11 @@ def load_texture(path: str | Path) -> np.ndarray:
     8/16-bit images are divided by 255/65535; colour images are converted to grey (OpenCV's
     luma weights); float images (``.exr``, ``.tif``, ``.npy``) must already be in [0, 1].
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("texture", "an existing texture file", str(path))
+    path = check_file(path, "texture", max_bytes=MAX_TEXTURE_BYTES, kind="texture file")
     if path.suffix.lower() == ".npy":
-        return _as_unit_image(str(path), np.load(path))
+        return _as_unit_image(
+            str(path), load_npy(path, "texture", max_bytes=MAX_TEXTURE_BYTES, shape=(None, None))
+        )
     import cv2
 
     image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
@@ -337,8 +380,8 @@ class SphereObject(_Model):
 
     _positional: ClassVar[tuple[str, ...]] = ("radius_m", "center_m", "material")
     type: Literal["sphere"] = "sphere"
-    radius_m: float = Field(gt=0.0)
-    """Radius in metres."""
+    radius_m: float = Field(gt=0.0, le=MAX_LENGTH_M)
+    """Radius in metres, in (0, :data:`MAX_LENGTH_M`]."""
     center_m: tuple[float, float, float]
     """Centre (x, y, z) in metres, world frame."""
     material: Material = Field(default_factory=Material)
@@ -408,6 +451,10 @@ class MeshObject(_Posed):
             raise InputError("path", f"a mesh file ({', '.join(MESH_SUFFIXES)})", str(path))
         if not path.is_file():
             raise InputError("path", "an existing mesh file", str(path))
+        try:
+            check_file(path, "mesh", max_bytes=MAX_MESH_BYTES, kind="mesh file")
+        except InputError as error:  # too large: keep the key as the name, the path as got
+            raise InputError("path", error.expected, f"{path} ({error.got})") from None
         return path
 
     @field_serializer("path")
@@ -425,23 +472,80 @@ class MeshObject(_Posed):
         """
         import trimesh
 
+        path = check_file(self.path, "mesh", max_bytes=MAX_MESH_BYTES, kind="mesh file")
         try:
-            mesh = trimesh.load(self.path, force="mesh", process=False)
+            mesh = trimesh.load(path, force="mesh", process=False)
         except Exception as error:  # trimesh raises many types for bad files
-            raise InputError(str(self.path), "a readable triangle mesh", f"{error}") from None
-        vertices = np.asarray(mesh.vertices, dtype=np.float64)
-        faces = np.asarray(mesh.faces, dtype=np.int64)
-        if len(vertices) == 0 or len(faces) == 0:
-            raise InputError(str(self.path), "a mesh with triangles", "an empty mesh")
-        uv = getattr(mesh.visual, "uv", None)
+            raise InputError(f"mesh {path}", "a readable triangle mesh", f"{error}") from None
+        vertices = np.asarray(getattr(mesh, "vertices", ()), dtype=np.float64).reshape(-1, 3)
+        faces = np.asarray(getattr(mesh, "faces", ()), dtype=np.int64).reshape(-1, 3)
+        uv = getattr(getattr(mesh, "visual", None), "uv", None)
         uv = None if uv is None or len(uv) != len(vertices) else np.asarray(uv, np.float64)
-        return self.pose.apply(vertices * self.scale_to_m), faces, uv
+        _check_mesh(f"mesh {path}", vertices, faces, uv)
+        world = self.pose.apply(vertices * self.scale_to_m)
+        reach = float(np.abs(world).max())
+        if reach > MAX_LENGTH_M:
+            raise InputError(
+                f"mesh {path}",
+                f"vertices within +-{MAX_LENGTH_M:g} m of the world origin (check scale_to_m)",
+                f"a vertex {reach:.3g} m away",
+            )
+        return world, faces, uv
 
     def bounds_world(self) -> np.ndarray:
         """(8, 3) float64 corners of the world-frame bounding box of the vertices, metres."""
         vertices = self.load()[0]
         low, high = vertices.min(axis=0), vertices.max(axis=0)
         return low + (_CORNER_SIGNS + 1.0) / 2.0 * (high - low)
+
+
+def _check_mesh(label: str, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None) -> None:
+    """Refuse a mesh that cannot be rendered or measured faithfully.
+
+    Parameters
+    ----------
+    label : ``"mesh <path>"`` for messages.
+    vertices : (V, 3) float64, file units.
+    faces : (F, 3) int64 vertex indices.
+    uv : (V, 2) float64 texture coordinates, or None.
+
+    Raises
+    ------
+    InputError
+        No triangles; non-finite vertex or uv coordinates; face indices outside
+        ``[0, V)``; zero total area; or degenerate faces (zero area, e.g. a vertex index
+        repeated: they have no normal and break point-to-mesh distances).
+    """
+    if len(vertices) == 0 or len(faces) == 0:
+        raise InputError(label, "a mesh with triangles", "an empty mesh")
+    bad = ~np.isfinite(vertices).all(axis=1)
+    if bad.any():
+        first = int(np.flatnonzero(bad)[0])
+        raise InputError(
+            label, "finite vertex coordinates", f"{int(bad.sum())} non-finite (first #{first})"
+        )
+    if uv is not None and not np.isfinite(uv).all():
+        raise InputError(label, "finite texture coordinates", "non-finite uv")
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise InputError(
+            label,
+            f"face indices in [0, {len(vertices)})",
+            f"indices {int(faces.min())}..{int(faces.max())}",
+        )
+    corners = vertices[faces]
+    areas = 0.5 * np.linalg.norm(
+        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
+    )
+    if not areas.sum() > 0:
+        raise InputError(label, "a surface with area", "zero total area")
+    degenerate = areas == 0  # includes every face that repeats a vertex index
+    if degenerate.any():
+        first = int(np.flatnonzero(degenerate)[0])
+        raise InputError(
+            label,
+            "no degenerate faces (with trimesh: mesh.update_faces(mesh.nondegenerate_faces()))",
+            f"{int(degenerate.sum())} of {len(faces)} faces with zero area (first #{first})",
+        )
 
 
 class TexturedPlaneObject(_Rectangle):
@@ -512,8 +616,9 @@ class Scene(_Model):
     """The objects (world frame = camera frame unless the renderer says otherwise)."""
     background: PlaneObject | None = None
     """A plane behind the objects (or None)."""
-    ambient: float = Field(0.0, ge=0.0)
-    """Uniform ambient light level, relative to the projector's white (see module docs)."""
+    ambient: float = Field(0.0, ge=0.0, le=MAX_AMBIENT)
+    """Uniform ambient light level, relative to the projector's white (see module docs), in
+    [0, :data:`MAX_AMBIENT`]."""
 
     @model_validator(mode="after")
     def _not_empty(self) -> Scene:
@@ -618,17 +723,14 @@ def _relative_paths(data: Mapping[str, Any], base: Path) -> dict[str, Any]:
 
 
 def load_scene(path: str | Path) -> Scene:
-    """Read a scene YAML file (see the module docstring); unknown keys raise InputError."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("scene", "an existing YAML file", str(path))
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as error:
-        raise InputError(str(path), "valid YAML", str(error).splitlines()[0]) from None
-    if not isinstance(data, Mapping):
-        raise InputError(str(path), "a YAML mapping with scene keys", type(data).__name__)
-    return Scene.from_dict(data, base_dir=path.parent)
+    """Read a scene YAML file (see the module docstring).
+
+    The file is read through :func:`virtus.safeio.read_yaml` (size, UTF-8, aliases, depth,
+    syntax) and must hold a mapping; unknown keys and values out of bounds raise
+    :class:`InputError`.
+    """
+    data = read_yaml(path, "scene", expect=dict)
+    return Scene.from_dict(data, base_dir=Path(path).parent)
 
 
 def default_scene() -> Scene:
