@@ -16,7 +16,7 @@ from virtus.errors import VirtusError
 from virtus.patterns import default_sequence
 from virtus.scanner import Scanner
 from virtus.scene import Scene, SphereObject, TexturedPlaneObject
-from virtus.sensor import Sensor
+from virtus.sensor import SENSOR_PRESETS
 from virtus.transforms import Pose
 
 REPO = Path(__file__).resolve().parents[1]
@@ -27,7 +27,7 @@ def captured():
     rig, sequence = small_rig(), default_sequence()
     board = TexturedPlaneObject((0.2, 0.1), np.eye(4) * 0.5 + 0.25, Pose(np.eye(3), (0, 0, 1.2)))
     scene = Scene([SphereObject(0.05, (0, 0, 1.0)), board])
-    scanner = Scanner(rig=rig, sequence=sequence, sensor=Sensor(bit_depth=16, read_noise_dn=3.0))
+    scanner = Scanner(rig=rig, sequence=sequence, sensor=SENSOR_PRESETS["imx174"])
     return scanner, scene, scanner.capture(scene, rng=7, command=["test"])
 
 
@@ -37,7 +37,7 @@ def test_capture_round_trip(tmp_path, captured) -> None:
     data = json.loads(manifest.read_text())
     assert data["format"] == CAPTURE_FORMAT
     assert data["rig"] == scanner.rig.to_dict() and data["units"]["length"] == "m"
-    assert data["render"]["spp"] == 4 and data["bit_depth"] == 16 and data["seed"] == 7
+    assert data["render"]["spp"] == 4 and data["bit_depth"] == 12 and data["seed"] == 7
     assert data["frames"]["files"][:2] == ["frames/000.png", "frames/001.png"]
     assert data["provenance"]["source"] == "rendered" and data["provenance"]["command"] == ["test"]
 

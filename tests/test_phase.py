@@ -129,3 +129,78 @@ def test_quality_mask_modulation_and_saturation() -> None:
     with pytest.raises(InputError) as info:
         phase.quality_mask(modulation, min_modulation=1.5)
     assert info.value.name == "min_modulation"
+
+
+def test_unwrap_nearest_picks_the_branch_in_a_half_open_window() -> None:
+    predicted = np.array([0.0, 10.0, 10.0, -4.0])
+    wrapped = phase.wrap(np.array([np.pi, 10.0 + np.pi - 1e-9, 10.0 - np.pi, -4.0 + 0.3]))
+    got = phase.unwrap_nearest(wrapped, predicted)
+    np.testing.assert_allclose(
+        got, [-np.pi, 10.0 + np.pi - 1e-9, 10.0 - np.pi, -3.7], atol=tol.PHASE_EXACT_RAD
+    )
+
+
+def test_binary_and_gray_bits_to_index() -> None:
+    k = np.arange(64)
+    bits = np.array([(k >> (5 - b)) & 1 for b in range(6)], dtype=bool)
+    np.testing.assert_array_equal(phase.bits_to_index(bits, "binary"), k)
+    gray = phase.gray_encode(k)
+    bits = np.array([(gray >> (5 - b)) & 1 for b in range(6)], dtype=bool)
+    np.testing.assert_array_equal(phase.bits_to_index(bits, "gray"), k)
+    with pytest.raises(InputError):
+        phase.bits_to_index(bits, "excess-3")
+
+
+def test_temporal_unwrapping_is_exact_and_checks_coverage() -> None:
+    periods = [18.0, 144.0, 1152.0]
+    u = np.linspace(-0.5, 1139.5, 20001)
+    wrapped = [phase.wrap(TWO_PI * u / p) for p in periods]
+    absolute, residual = phase.unwrap_temporal(wrapped, periods, 1140)
+    np.testing.assert_allclose(
+        phase.phase_to_coordinate(absolute, 18.0), u, atol=tol.DECODE_EXACT_PX
+    )
+    assert np.max(residual) < tol.HETERODYNE_RESIDUAL_EXACT
+    with pytest.raises(InputError) as info:
+        phase.unwrap_temporal(wrapped[:2], periods[:2], 1140)
+    assert info.value.name == "periods"
+
+
+def smooth_phase(shape=(120, 160), period=18.0):
+    rows, cols = np.mgrid[0 : shape[0], 0 : shape[1]].astype(float)
+    absolute = TWO_PI * (0.7 * cols + 0.2 * rows + 3.3) / period
+    return absolute, phase.wrap(absolute)
+
+
+def test_order_consistency_flags_and_corrects_order_errors() -> None:
+    absolute, wrapped = smooth_phase()
+    valid = np.ones(absolute.shape, dtype=bool)
+    flagged, correction = phase.order_consistency(absolute, wrapped, valid)
+    assert not flagged.any() and not correction.any()
+    # Isolated misreads and a wrong description (every other half period one order low).
+    rng = np.random.default_rng(3)
+    spots = rng.random(absolute.shape) < 0.01
+    for wrong in (spots, wrapped < 0):
+        broken = absolute - TWO_PI * wrong
+        flagged, correction = phase.order_consistency(broken, wrapped, valid)
+        fixed = broken + TWO_PI * correction
+        if wrong is spots:
+            np.testing.assert_array_equal(flagged, spots)
+        assert flagged.mean() >= min(wrong.mean(), 1 - wrong.mean()) - 0.01
+        # Repaired to one consistent surface (at most a global order off).
+        assert np.unique(np.rint((fixed - absolute) / TWO_PI)).size == 1
+
+
+def test_order_consistency_leaves_depth_edges_and_unrelated_points_alone() -> None:
+    absolute, wrapped = smooth_phase()
+    # An object in front: a different, unrelated surface inside a disc (a depth edge).
+    rows, cols = np.mgrid[0:120, 0:160]
+    disc = (rows - 60) ** 2 + (cols - 80) ** 2 < 30**2
+    other = TWO_PI * (0.9 * cols - 0.3 * rows + 250.0) / 18.0
+    scene = np.where(disc, other, absolute)
+    valid = np.ones(scene.shape, dtype=bool)
+    flagged, _ = phase.order_consistency(scene, phase.wrap(scene), valid)
+    assert flagged.mean() < tol.FLAGGED_CORRECT_MAX
+    # Unrelated points (no continuous surface): the check abstains.
+    random = TWO_PI * np.random.default_rng(1).uniform(0, 900, (50, 60)) / 18.0
+    flagged, _ = phase.order_consistency(random, phase.wrap(random), np.ones((50, 60), bool))
+    assert not flagged.any()

@@ -11,10 +11,14 @@ from virtus.patterns import default_sequence
 from virtus.render import render, trace
 from virtus.render.synthesis import synthesize
 from virtus.scene import default_scene
+from tests import tolerances as tol
+from virtus.phase import wrapped_phase
 from virtus.sensor import (
     NOISE_BLOCK_PIXELS,
+    SENSOR_PRESETS,
     Sensor,
     as_seed,
+    load_sensor,
     standard_normal,
 )
 
@@ -32,14 +36,14 @@ def test_noise_stream_does_not_depend_on_the_split() -> None:
     assert not np.array_equal(standard_normal(6, 3, slice(0, 100)), whole[:100])
 
 
-def test_read_noise_has_the_stated_deviation() -> None:
-    sensor = Sensor(bit_depth=16, exposure=1.0, read_noise_dn=4.0)
+def test_dark_noise_has_the_stated_deviation() -> None:
+    sensor = Sensor(bit_depth=16, exposure=1.0, system_gain_dn_per_e=1.0, dark_noise_e=4.0)
     n = 4 * NOISE_BLOCK_PIXELS
     radiance = np.full((2, n), 1000.25, dtype=np.float32)
     digital = sensor.digitize(radiance, 1.0, seed=1, frames=np.array([0, 1]), pixels=slice(0, n))
     values = digital.astype(np.float64)
-    # Quantisation adds 1/12 DN^2 to the variance.
-    assert values.std() == pytest.approx(np.sqrt(16 + 1 / 12), rel=0.02)
+    # Shot noise adds the signal (1000.25 e- at K = 1), quantisation 1/12 DN^2.
+    assert values.std() == pytest.approx(np.sqrt(16 + 1000.25 + 1 / 12), rel=0.02)
     assert values.mean() == pytest.approx(1000.25, abs=0.05)
     assert abs(np.corrcoef(values[0], values[1])[0, 1]) < 0.02  # frames are independent
 
@@ -53,7 +57,7 @@ def noisy_trace():
 def test_noisy_frames_are_byte_identical_whatever_the_threads_and_blocks(noisy_trace) -> None:
     _, traced = noisy_trace
     sequence = default_sequence()
-    sensor = Sensor(bit_depth=12, read_noise_dn=2.5)
+    sensor = SENSOR_PRESETS["imx174"]
     exposure = sensor.exposure_for(traced.white)
 
     def frames(threads: int, block: int) -> np.ndarray:
@@ -85,7 +89,7 @@ def test_noise_is_the_same_on_the_jit_path(noisy_trace) -> None:
     # The Dr.Jit synthesis (the GPU path, run here on the LLVM backend) draws the same streams:
     # the frames differ only where float32 radiance rounds differently (at most 1 DN, rarely).
     rig, _ = noisy_trace
-    sensor = Sensor(bit_depth=12, read_noise_dn=2.5)
+    sensor = SENSOR_PRESETS["imx174"]
     kwargs = {"sensor": sensor, "rng": 3, "lookup": "bilinear"}
     sparse = render(rig, default_scene(), default_sequence(), synthesis="sparse", **kwargs)
     jit = render(rig, default_scene(), default_sequence(), synthesis="jit", **kwargs)
@@ -98,8 +102,12 @@ def test_noise_is_the_same_on_the_jit_path(noisy_trace) -> None:
     [
         ({"bit_depth": 14}, "bit_depth"),
         ({"bit_depth": True}, "bit_depth"),
-        ({"read_noise_dn": -1.0}, "read_noise_dn"),
-        ({"read_noise_dn": float("nan")}, "read_noise_dn"),
+        ({"system_gain_dn_per_e": 0.1, "dark_noise_e": -1.0}, "dark_noise_e"),
+        ({"system_gain_dn_per_e": 0.1, "dark_noise_e": float("nan")}, "dark_noise_e"),
+        ({"dark_noise_e": 2.0}, "system_gain_dn_per_e"),
+        ({"system_gain_dn_per_e": 0.1, "prnu": 1.5}, "prnu"),
+        ({"quantum_efficiency": 1.2}, "quantum_efficiency"),
+        ({"black_level_dn": 300.0}, "black_level_dn"),
         ({"exposure": 0.0}, "exposure"),
     ],
 )
@@ -116,8 +124,88 @@ def test_seeds() -> None:
             as_seed(bad)
 
 
-def test_sensor_round_trips_through_its_dict() -> None:
-    sensor = Sensor(bit_depth=10, exposure=12.5, read_noise_dn=1.5)
-    assert Sensor.from_dict(sensor.to_dict()) == sensor
-    with pytest.raises(InputError, match="sensor"):
-        Sensor.from_dict({**sensor.to_dict(), "gain": 2})
+def test_sensor_round_trips_through_its_dict_and_files(tmp_path) -> None:
+    for sensor in SENSOR_PRESETS.values():
+        assert Sensor.from_dict(sensor.to_dict()) == sensor
+    with pytest.raises(InputError, match="gain"):
+        Sensor.from_dict({**SENSOR_PRESETS["imx174"].to_dict(), "gain": 2})
+    path = tmp_path / "camera.yaml"
+    path.write_text("bit_depth: 10\nsystem_gain_dn_per_e: 0.25\ndark_noise_e: 3.5\n")
+    sensor = load_sensor(path)
+    assert sensor.bit_depth == 10 and sensor.dark_noise_e == 3.5 and sensor.name == "camera"
+    assert load_sensor("webcam") is SENSOR_PRESETS["webcam"]
+    path.write_text("bit_depth: 10\nsystem_gain: 0.25\n")
+    with pytest.raises(InputError, match="system_gain"):
+        load_sensor(path)
+    with pytest.raises(InputError, match="^sensor: expected a preset name"):
+        load_sensor("no-such-camera")
+
+
+def _flat_pair(sensor: Sensor, level_dn: float, n: int, seeds=(1, 2)) -> tuple[np.ndarray, ...]:
+    """Two frames of a uniform field whose noise-free signal is ``level_dn`` above black."""
+    radiance = np.full((1, n), level_dn, dtype=np.float32)
+    return tuple(
+        sensor.digitize(radiance, 1.0, seed=s, frames=np.array([0]), pixels=slice(0, n))[0].astype(
+            np.float64
+        )
+        for s in seeds
+    )
+
+
+def test_photon_transfer_follows_emva_1288() -> None:
+    # EMVA 1288's own method: from pairs of frames with different seeds, var(A - B) / 2
+    # against the mean signal above dark is a line of slope K and intercept
+    # K^2 sigma_d^2 + sigma_q^2 (sigma_d here includes the dark current's shot noise).
+    sensor = SENSOR_PRESETS["imx174"].with_(exposure=1.0)
+    gain = sensor.system_gain_dn_per_e
+    n = 1 << 17
+    dark = _flat_pair(sensor, 0.0, n)
+    mean_dark = np.mean(dark)
+    means, variances = [], []
+    for level in np.linspace(0.05, 0.7, 12) * sensor.full_scale:
+        a, b = _flat_pair(sensor, level, n)
+        means.append(0.5 * (a.mean() + b.mean()) - mean_dark)
+        variances.append(np.var(a - b) / 2)
+    slope, intercept = np.polyfit(means, variances, 1)
+    dark_e2 = sensor.dark_noise_e**2 + sensor.dark_current_e_per_s * sensor.exposure_time_s
+    assert slope == pytest.approx(gain, rel=tol.PHOTON_TRANSFER_SLOPE_REL)
+    assert intercept == pytest.approx(
+        gain**2 * dark_e2 + 1 / 12, rel=tol.PHOTON_TRANSFER_INTERCEPT_REL
+    )
+    # The dark frame's own temporal variance is the intercept too.
+    assert np.var(dark[0] - dark[1]) / 2 == pytest.approx(
+        intercept, rel=tol.PHOTON_TRANSFER_INTERCEPT_REL
+    )
+
+
+@pytest.mark.parametrize("steps", [3, 18])
+def test_phase_noise_matches_theory(steps) -> None:
+    # sigma_phi = sqrt(2 / N) sigma_I / B (Surrel 1997), with sigma_I^2 the EMVA temporal
+    # variance at the background level A (its mean over the N frames).
+    sensor = SENSOR_PRESETS["imx174"].with_(exposure=1.0, prnu=0.0)
+    gain = sensor.system_gain_dn_per_e
+    n = 1 << 16
+    rng = np.random.default_rng(0)
+    phi = rng.uniform(-np.pi, np.pi, n)
+    background, modulation = 1500.0, 900.0
+    shifts = 2 * np.pi * np.arange(1, steps + 1) / steps
+    radiance = (background + modulation * np.cos(phi[None] + shifts[:, None])).astype(np.float32)
+    frames = sensor.digitize(radiance, 1.0, seed=5, frames=np.arange(steps), pixels=slice(0, n))
+    measured, _, _ = wrapped_phase(frames.astype(np.float64) - sensor.black_level_dn)
+    error = np.angle(np.exp(1j * (measured - phi)))
+    dark_e2 = sensor.dark_noise_e**2 + sensor.dark_current_e_per_s * sensor.exposure_time_s
+    sigma_i = np.sqrt(gain**2 * dark_e2 + 1 / 12 + gain * background)
+    predicted = np.sqrt(2 / steps) * sigma_i / modulation
+    assert error.std() == pytest.approx(predicted, rel=tol.PHASE_NOISE_REL)
+    assert abs(error.mean()) < 0.05 * predicted  # no bias
+
+
+def test_full_well_and_adc_saturate() -> None:
+    sensor = SENSOR_PRESETS["webcam"].with_(exposure=1.0)
+    a, _ = _flat_pair(sensor, 10 * sensor.full_scale, 1000)
+    assert np.all(a == sensor.full_scale)
+    well = Sensor(
+        bit_depth=16, exposure=1.0, system_gain_dn_per_e=1.0, saturation_capacity_e=1000.0
+    )
+    b, _ = _flat_pair(well, 5000.0, 1000)
+    assert np.all(b == 1000)

@@ -65,6 +65,34 @@ INTENSITY_8BIT_DN = 1.0
 #: largest residual of heterodyne unwrapping from exact wrapped phases: float64 rounding
 #: (measured 7e-13 rad); a wrong beat or period ratio gives residuals of order 1 rad.
 HETERODYNE_RESIDUAL_EXACT = 1e-6
+#: codes without the complementary frame: both ends of a one-period code cell have the
+#: same phase, so a point closer to a code edge than the phase error is ambiguous. The 8-bit
+#: round trips (phase error <= 0.035 px) leave out random points within 0.05 px of a code
+#: edge; points at half periods are always kept (a code edge is never there).
+CODE_EDGE_BAND_PX = 0.05
+#: square-wave fringes: largest decoded phase error vs the harmonic series of the projected
+#: profile (issue requirement 10 %); the same frames, so they agree to float rounding.
+BINARY_FRINGE_PREDICTION_REL = 0.1
+#: share of valid pixels flagged under a wrong description (issue requirement: > 20 %);
+#: measured ~50 % (alignment swapped) and ~90 % (bit order swapped).
+FLAGGED_WRONG_MIN = 0.2
+#: ... and under the right one (issue requirement < 0.5 %; measured 0).
+FLAGGED_CORRECT_MAX = 0.005
+#: flagged share with noise sigma = 2 DN at B = 30 DN over 180 DN of ambient light: the
+#: 6-step heterodyne residual's tail above 0.4 pi (measured 0.94 %; temporal 0.02 %, code
+#: sequences 0).
+FLAGGED_NOISY_MAX = 0.02
+#: valid share under that noise: 6-step heterodyne pixels whose residual passes pi/2 are
+#: invalid (measured 99.95 %; 95.4 % at B = 20 DN); the other sequences keep 100 %.
+NOISY_VALID_MIN = 0.99
+#: sharp 18-step binary fringes on a DMD decode to a staircase (each projector pixel one
+#: value, +-0.5 px) plus the square wave's aliased harmonics (measured <= 0.17 rad at
+#: P = 36, about 1 px; max error measured 0.5 px at P = 18 and 1.0 px at P = 36): an order
+#: error is 18 px or more.
+DECODE_BINARY_MAX_PX = 1.5
+#: the same fringes through a defocused projector (blur sigma 1 camera px): measured max
+#: 0.19 px; 0.5 px is still far from an order error.
+DECODE_BLURRED_BINARY_MAX_PX = 0.5
 
 # --- reconstruct ------------------------------------------------------------------------
 #: triangulating exact correspondences (issue requirement). Closed-form ray intersection in
@@ -244,3 +272,49 @@ ICP_TRANSLATION_M = 1e-6
 #: C2M MAE of the free-form object, single view and merged turntable (issue requirement:
 #: 0.05 mm; measured 0.007 mm single view, 0.008 mm for 4-8 merged views, blurred projector).
 C2M_MAE_M = 5e-5
+
+# --- capture / import -------------------------------------------------------------------
+#: decoded vs ground-truth projector coordinates of a rendered 12-bit capture with bilinear
+#: projector pixels (160 px camera, 4 spp): as in the renderer's accuracy tests, the sample
+#: grid's sub-pixel spread dominates (~0.003-0.005 px RMS measured on larger cameras);
+#: 0.02 px is the issue's decoding requirement.
+DECODE_RENDERED_BILINEAR_PX = 0.02
+#: the lab sequence (binary 18-step fringes, N = 18): the square wave's aliased harmonics
+#: 17 and 19 leave a phase error of ~1e-3 rad (~0.003 px at T = 18); 0.03 px leaves room
+#: for the rendered sampling and still fails on any order or alignment error (>= 9 px).
+DECODE_LAB_BINARY_PX = 0.03
+#: share of decoded pixels flagged for a correct description of rendered frames (the issue
+#: asks for > 20 % under a wrong description; a clean decode must stay far below it).
+FLAGGED_SHARE_CLEAN = 0.005
+#: median |depth error| of an imported capture reconstructed through the paper code's text
+#: files (the txt round trip is exact to ~1e-15; the decode noise at 1 m is ~0.1 mm with
+#: bilinear pixels on a 160 px camera).
+IMPORTED_DEPTH_M = 5e-4
+
+# --- calibration files ------------------------------------------------------------------
+#: K read back from JSON, OpenCV YAML/XML (written with 17 significant digits) or text files
+#: (repr): exact in float64 (measured 0); 1e-12 relative fails on any lost digit or swap.
+CALIB_IO_K_REL = 1e-12
+#: proj2cam.t read back, metres: mm -> m is a multiplication by 0.001 (inexact in binary)
+#: and stereo files store X_proj = R X_cam + T, inverted as -R^T T: a few ulps of 0.1 m,
+#: measured <= 3e-17 m. 1e-12 m fails on any unit slip (1e-3 relative) or sign error.
+CALIB_IO_T_M = 1e-12
+#: a rig composed from a camera pose and a projector pose in a board frame (some labs' text
+#: folders): two float64 products of values of order 1 (R) and 0.1-1 m (t), ~1e-16.
+CALIB_IO_COMPOSED = 1e-12
+
+# --- pipeline.calibrate (the calibration job: resume, reproducibility) ------------------
+#: focal length of the small job the resume tests run (paper rig at 1/4 resolution, 1 spp,
+#: 4x7 board, 6 random poses, seed 5): measured -7.1e-5; it only shows the small
+#: configuration still calibrates (a run that solved garbage would be off by > 1e-2).
+CALIB_JOB_SMALL_FOCAL_REL = 1e-3
+
+# --- sensor -----------------------------------------------------------------------------
+#: photon transfer slope vs the system gain K (issue requirement 3 %; 12 levels x 131k
+#: pixels give a variance estimate within ~0.4 % per level).
+PHOTON_TRANSFER_SLOPE_REL = 0.03
+#: photon transfer intercept vs K^2 sigma_d^2 + sigma_q^2 (issue requirement 10 %).
+PHOTON_TRANSFER_INTERCEPT_REL = 0.10
+#: measured phase noise vs sqrt(2/N) sigma_I / B (issue requirement 5 %; 65k pixels give
+#: the standard deviation to ~0.3 %).
+PHASE_NOISE_REL = 0.05

@@ -310,3 +310,67 @@ class Intrinsics:
         """(height, width, 2) float64 pixel-centre coordinates ``(u, v)`` of every pixel."""
         v, u = np.mgrid[0 : self.height, 0 : self.width].astype(np.float64)
         return np.stack([u, v], axis=-1)
+
+
+@dataclass(frozen=True)
+class ThinLens:
+    """A thin lens focused at a plane: the aperture that gives a device its depth of field.
+
+    A pinhole device (no ``ThinLens``) is in focus everywhere. With a lens, a point at depth
+    ``d`` (metres along the optical axis) is imaged as a blur circle of diameter
+    ``c = A f |d - d_f| / (d (d_f - f))`` on the image plane, i.e. ``A fx |d - d_f| /
+    (d (d_f - f))`` pixels for a focal length of ``fx`` pixels (thin-lens law).
+
+    Parameters
+    ----------
+    aperture_m : entrance-pupil diameter ``A`` (metres, > 0); ``A = f / N`` for an f-number N.
+    focus_distance_m : depth ``d_f`` of the plane in focus (metres, > ``focal_length_m``).
+    focal_length_m : focal length ``f`` (metres, > 0), which only enters through
+        ``d_f - f``; None treats it as negligible against ``d_f`` (``f << d_f``).
+    """
+
+    aperture_m: float
+    focus_distance_m: float
+    focal_length_m: float | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "aperture_m", positive("aperture_m", self.aperture_m))
+        focus = positive("focus_distance_m", self.focus_distance_m)
+        object.__setattr__(self, "focus_distance_m", focus)
+        if self.focal_length_m is not None:
+            focal = positive("focal_length_m", self.focal_length_m)
+            if focal >= focus:
+                raise InputError(
+                    "focal_length_m", f"a focal length < the focus distance {focus}", focal
+                )
+            object.__setattr__(self, "focal_length_m", focal)
+
+    @classmethod
+    def from_f_number(
+        cls, f_number: float, focal_length_m: float, focus_distance_m: float
+    ) -> ThinLens:
+        """The lens of an f-number ``N`` and focal length ``f``: ``A = f / N``."""
+        focal = positive("focal_length_m", focal_length_m)
+        return cls(focal / positive("f_number", f_number), focus_distance_m, focal)
+
+    def blur_diameter_px(self, depth_m: object, focal_px: float) -> np.ndarray:
+        """Blur-circle diameter (pixels) of points at ``depth_m`` (metres along the axis)
+        for a device of focal length ``focal_px`` pixels."""
+        d = np.asarray(depth_m, dtype=np.float64)
+        f = 0.0 if self.focal_length_m is None else self.focal_length_m
+        d_f = self.focus_distance_m
+        return self.aperture_m * positive("focal_px", focal_px) * np.abs(d - d_f) / (d * (d_f - f))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready parameters (metres)."""
+        return {
+            "aperture_m": self.aperture_m,
+            "focus_distance_m": self.focus_distance_m,
+            "focal_length_m": self.focal_length_m,
+        }
+
+    @classmethod
+    def from_dict(cls, data: object, name: str = "lens") -> ThinLens:
+        """Inverse of :meth:`to_dict`; unknown keys are refused."""
+        check_keys(data, ("aperture_m", "focus_distance_m", "focal_length_m"), name)
+        return cls(**data)  # type: ignore[arg-type]

@@ -10,6 +10,9 @@ Conventions (shared with :mod:`virtus.patterns`):
 * Fringe order ``k = floor(u / T + 1/2)``: ``Phi = phi + 2 pi k`` with the wrapped phase
   ``phi`` in ``[-pi, pi)``, so orders change where the wrapped phase jumps.
 * Gray codes are given most significant bit first.
+* Consistency: a decode is checked against redundancy it carries (the half-period code of a
+  complementary frame, the residual of temporal unwrapping) and, in images, against its
+  neighbours (:func:`order_consistency`): pixels whose fringe order disagrees are *flagged*.
 
 Every function is vectorised over arbitrary trailing ``(...)`` pixel shapes, typically
 ``(H, W)`` camera images indexed ``[row, col]``. This module only needs numpy.
@@ -30,15 +33,19 @@ __all__ = [
     "absolute_phase_in_window",
     "beat_period",
     "binarize",
+    "bits_to_index",
     "complementary_order",
     "coordinate_to_phase",
     "gray_bits_to_order",
     "gray_decode",
     "gray_encode",
+    "order_consistency",
     "phase_to_coordinate",
     "quality_mask",
     "unwrap_gray",
     "unwrap_heterodyne",
+    "unwrap_nearest",
+    "unwrap_temporal",
     "unwrap_with_reference",
     "wrap",
     "wrapped_phase",
@@ -193,6 +200,33 @@ def gray_bits_to_order(bits: np.ndarray) -> np.ndarray:
     return order
 
 
+def bits_to_index(bits: np.ndarray, code: str = "gray") -> np.ndarray:
+    """Integer index from binarised code frames, most significant bit first.
+
+    Parameters
+    ----------
+    bits : (n, ...) bool, the code's bits, most significant first.
+    code : ``"gray"`` (reflected binary code, see :func:`gray_bits_to_order`) or
+        ``"binary"`` (plain binary).
+
+    Returns
+    -------
+    (...) int64 in ``[0, 2**n)``.
+    """
+    if code == "gray":
+        return gray_bits_to_order(bits)
+    if code != "binary":
+        raise InputError("code", "'gray' or 'binary'", code)
+    stack = np.asarray(bits, dtype=bool)
+    if stack.ndim < 1 or stack.shape[0] < 1:
+        raise InputError("bits", "an array of shape (n, ...) with n >= 1", f"shape {stack.shape}")
+    index = np.zeros(stack.shape[1:], dtype=np.int64)
+    for bit in stack:
+        index <<= 1
+        index |= bit
+    return index
+
+
 def complementary_order(code: np.ndarray) -> np.ndarray:
     """Floor order ``floor(u / T)`` from the half-period code of the complementary Gray code.
 
@@ -245,6 +279,27 @@ def unwrap_gray(
         half = 0.5 * np.pi
         k = np.where(phi >= half, k2, np.where(phi < -half, k2 + 1, k1))
     return phi + TWO_PI * k
+
+
+def unwrap_nearest(phase: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+    """Absolute phase: the ``2 pi`` branch of ``phase`` nearest a predicted absolute phase.
+
+    Parameters
+    ----------
+    phase : (...) float, wrapped phase in radians (any branch).
+    predicted : (...) float, predicted absolute phase in radians, e.g. the phase of the centre
+        of the projector interval that a pixel's code names.
+
+    Returns
+    -------
+    (...) float64, ``phase + 2 pi k`` with ``result - predicted`` in ``[-pi, pi)``; the
+    interval is half-open like a projector pixel, so a code cell exactly one period wide
+    gives exactly one branch.
+    """
+    phi = np.asarray(phase, dtype=np.float64)
+    centre = np.asarray(predicted, dtype=np.float64)
+    order = np.ceil((centre - phi - np.pi) / TWO_PI)
+    return phi + TWO_PI * order
 
 
 def beat_period(period_a: float, period_b: float) -> float:
@@ -370,6 +425,51 @@ def unwrap_heterodyne(
     return absolute, residual
 
 
+def unwrap_temporal(
+    phases: Sequence[np.ndarray] | np.ndarray, periods: Sequence[float], extent: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Multi-wavelength (hierarchical temporal) unwrapping.
+
+    The longest period must cover the projector axis (``>= extent``): its phase is absolute
+    by :func:`absolute_phase_in_window`. Each shorter period, longest to shortest, is then
+    unwrapped from the previous one with :func:`unwrap_with_reference` (ratio
+    ``T_(i+1) / T_i``, best an integer or close to one; Saldner & Huntley, Appl. Opt. 36,
+    2770, 1997). The phase noise of a level is multiplied by its ratio, so keep ratios modest
+    (the order is wrong once ratio x noise reaches pi).
+
+    Parameters
+    ----------
+    phases : (m, ...) float, wrapped phases in radians, ``phases[i]`` for ``periods[i]``.
+    periods : (m,) fringe periods, m >= 2, all different; the longest ``>= extent``.
+    extent : projector pixels (pattern units) along the axis.
+
+    Returns
+    -------
+    absolute : (...) float64, absolute phase ``2 pi u / T_min`` of the shortest period, rad.
+    residual : (...) float64, the largest ``|residual|`` of the steps, radians.
+    """
+    values = [positive("periods", p) for p in periods]
+    if len(values) < 2 or len(set(values)) != len(values):
+        raise InputError("periods", "two or more different periods", periods)
+    if len(phases) != len(values):
+        raise InputError("phases", f"{len(values)} phase maps (one per period)", len(phases))
+    order = np.argsort(values)[::-1]  # longest first
+    if values[order[0]] < extent:
+        raise InputError(
+            "periods", f"a longest period that covers the extent {extent} px", max(values)
+        )
+    absolute = absolute_phase_in_window(phases[order[0]], values[order[0]], extent)
+    residual = np.zeros_like(absolute)
+    reference_period = values[order[0]]
+    for index in order[1:]:
+        absolute, step_residual = unwrap_with_reference(
+            phases[index], absolute, reference_period / values[index]
+        )
+        residual = np.maximum(residual, np.abs(step_residual))
+        reference_period = values[index]
+    return absolute, residual
+
+
 def phase_to_coordinate(phase: np.ndarray, period: float) -> np.ndarray:
     """Projector coordinate ``u = Phi T / (2 pi)`` (px) from absolute phase ``Phi`` (rad)."""
     return np.asarray(phase, dtype=np.float64) * (positive("period", period) / TWO_PI)
@@ -378,3 +478,171 @@ def phase_to_coordinate(phase: np.ndarray, period: float) -> np.ndarray:
 def coordinate_to_phase(coordinate: np.ndarray, period: float) -> np.ndarray:
     """Absolute phase ``Phi = 2 pi u / T`` (rad) of projector coordinate ``u`` (px)."""
     return np.asarray(coordinate, dtype=np.float64) * (TWO_PI / positive("period", period))
+
+
+#: Neighbour links whose wrapped phases differ by at most this (rad) are taken to lie on one
+#: continuous surface: a smooth surface sampled at >= 8 camera px per fringe period stays
+#: far below it, a depth edge passes it only by chance (about 1 link in 4).
+CONTINUITY_RAD = 0.25 * np.pi
+#: The neighbour check needs fringes sampled that finely: it abstains unless more than this
+#: share of the links between valid neighbours is continuous (images of unrelated points,
+#: or fringes too fine for the camera, give about 1/4).
+MIN_CONTINUOUS_SHARE = 0.5
+#: Two regions are tied by an order offset only when this share of the valid links between
+#: them is continuous and agrees on one offset (an order error inside a smooth surface gives
+#: 1.0; a depth edge about 1/4 and mixed offsets).
+MIN_LINK_SUPPORT = 0.9
+#: A region whose absolute phase spans at least this (rad) is never flagged: a misread code
+#: near a cell edge makes a band narrower than one code cell (one period), while a surface
+#: seen across a depth edge whose parallax happens to be a whole number of periods (a sphere
+#: before a wall) spans many periods and only looks like an order error.
+MAX_ERROR_SPAN_RAD = TWO_PI
+
+
+def order_consistency(
+    absolute: np.ndarray, wrapped: np.ndarray, valid: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Fringe orders that disagree with their neighbours on a continuous surface.
+
+    On a continuous surface two neighbouring camera pixels have close wrapped phases and
+    absolute phases that differ by the same small amount; a fringe-order error breaks this
+    by a whole ``2 pi``. The image is cut into *regions* of valid pixels joined by
+    consistent links (wrapped difference ``<= CONTINUITY_RAD``, absolute difference equal to
+    it). Regions touching along continuous links that jump by ``2 pi j`` are tied by the
+    order offset ``j`` when :data:`MIN_LINK_SUPPORT` of their shared links agree; in each
+    group of tied regions the offset carried by most pixels is taken as right and every
+    other pixel is flagged with the order correction that makes it agree -- unless its
+    region spans :data:`MAX_ERROR_SPAN_RAD` or more of phase (a whole surface, not a band of
+    misread code).
+
+    Parameters
+    ----------
+    absolute : (H, W) float, absolute phase in radians (NaN where invalid).
+    wrapped : (H, W) float, the wrapped phase it was unwrapped from, radians.
+    valid : (H, W) bool, pixels to check.
+
+    Returns
+    -------
+    flagged : (H, W) bool, valid pixels whose order disagrees with the majority of their
+        tied regions.
+    correction : (H, W) int64, orders to add to ``absolute`` (``+ 2 pi correction``) to make
+        them agree; 0 where not flagged.
+
+    Notes
+    -----
+    Nothing is flagged (the check abstains) unless more than :data:`MIN_CONTINUOUS_SHARE`
+    of the links between valid neighbours is continuous, or for arrays that are not 2-D.
+    Uses scipy (``ndimage.label``, ``sparse.csgraph``).
+    """
+    valid = np.asarray(valid, dtype=bool)
+    flagged = np.zeros(valid.shape, dtype=bool)
+    correction = np.zeros(valid.shape, dtype=np.int64)
+    if valid.ndim != 2 or min(valid.shape) < 1:
+        return flagged, correction
+    absolute = np.where(valid, np.asarray(absolute, dtype=np.float64), 0.0)
+    wrapped = np.where(valid, np.asarray(wrapped, dtype=np.float64), 0.0)
+    links = [_links(absolute, wrapped, valid, axis) for axis in (0, 1)]
+    both = sum(int(link[0].sum()) for link in links)
+    continuous = sum(int(link[1].sum()) for link in links)
+    if both == 0 or continuous <= MIN_CONTINUOUS_SHARE * both:
+        return flagged, correction
+    from scipy import ndimage
+
+    height, width = valid.shape
+    grid = np.zeros((2 * height - 1, 2 * width - 1), dtype=bool)
+    grid[::2, ::2] = valid
+    grid[1::2, ::2] = links[0][1] & (links[0][2] == 0)  # row neighbours
+    grid[::2, 1::2] = links[1][1] & (links[1][2] == 0)  # column neighbours
+    labels, count = ndimage.label(grid)
+    region = labels[::2, ::2]  # 0 outside valid pixels, regions 1..count
+    pairs = []
+    for axis, (has_both, is_continuous, jump) in zip((0, 1), links, strict=True):
+        first = region[:-1, :] if axis == 0 else region[:, :-1]
+        second = region[1:, :] if axis == 0 else region[:, 1:]
+        cross = has_both & (first != second)
+        pairs.append((first[cross], second[cross], is_continuous[cross], jump[cross]))
+    a, b, cont, jump = (np.concatenate(column) for column in zip(*pairs, strict=True))
+    offsets = _region_offsets(a, b, cont, jump, region, count)
+    if count:
+        index = np.arange(1, count + 1)
+        span = ndimage.maximum(absolute, region, index) - ndimage.minimum(absolute, region, index)
+        offsets[1:][np.asarray(span) >= MAX_ERROR_SPAN_RAD] = 0
+    correction = np.where(valid, offsets[region], 0)
+    return correction != 0, correction
+
+
+def _links(
+    absolute: np.ndarray, wrapped: np.ndarray, valid: np.ndarray, axis: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Links between each pixel and its next neighbour along ``axis``: both valid,
+    continuous, and the order jump ``round((dPhi - dphi) / 2 pi)`` (first minus second)."""
+    cut = (slice(None, -1), slice(None)) if axis == 0 else (slice(None), slice(None, -1))
+    nxt = (slice(1, None), slice(None)) if axis == 0 else (slice(None), slice(1, None))
+    both = valid[cut] & valid[nxt]
+    local = wrap(wrapped[cut] - wrapped[nxt])
+    continuous = both & (np.abs(local) <= CONTINUITY_RAD)
+    jump = np.rint((absolute[cut] - absolute[nxt] - local) / TWO_PI).astype(np.int64)
+    return both, continuous, np.where(continuous, jump, 0)
+
+
+def _region_offsets(
+    a: np.ndarray, b: np.ndarray, cont: np.ndarray, jump: np.ndarray, region: np.ndarray, count: int
+) -> np.ndarray:
+    """(count + 1,) int64 order corrections per region (index 0: invalid pixels, 0)."""
+    from scipy.sparse import coo_array
+    from scipy.sparse.csgraph import breadth_first_order, minimum_spanning_tree
+
+    offsets = np.zeros(count + 1, dtype=np.int64)
+    if a.size == 0:
+        return offsets
+    low, high = np.minimum(a, b), np.maximum(a, b)
+    signed = np.where(a == low, jump, -jump)  # order of `low` minus continuity from `high`
+    pair_key = low.astype(np.int64) * (count + 1) + high
+    keys, totals = np.unique(pair_key, return_counts=True)
+    votes, vote_counts = np.unique(
+        np.stack([pair_key[cont], signed[cont]]), axis=1, return_counts=True
+    )
+    if votes.size == 0:
+        return offsets
+    # Strongest offset per pair (the last of each key after sorting by count).
+    order = np.lexsort((vote_counts, votes[0]))
+    votes, vote_counts = votes[:, order], vote_counts[order]
+    last = np.r_[votes[0, 1:] != votes[0, :-1], True]
+    pair, offset, support = votes[0, last], votes[1, last], vote_counts[last]
+    support = support / totals[np.searchsorted(keys, pair)]
+    keep = (support >= MIN_LINK_SUPPORT) & (offset != 0)
+    if not keep.any():
+        return offsets
+    pair, offset, strength = pair[keep], offset[keep], vote_counts[last][keep]
+    # Only regions with ties take part: number them 1..m, node 0 is a virtual root tied to
+    # every one, so one search covers all groups; the maximum spanning tree keeps the best
+    # supported ties where they form cycles.
+    involved, compact = np.unique(
+        np.r_[pair // (count + 1), pair % (count + 1)], return_inverse=True
+    )
+    low, high = np.split(compact + 1, 2)
+    nodes = involved.size + 1
+    rows = np.r_[low, np.zeros(nodes - 1, dtype=np.int64)]
+    cols = np.r_[high, np.arange(1, nodes)]
+    weights = np.r_[1.0 / strength, np.full(nodes - 1, 1e9)]
+    tree = minimum_spanning_tree(coo_array((weights, (rows, cols)), shape=(nodes, nodes)))
+    tie = {(int(lo), int(hi)): int(o) for lo, hi, o in zip(low, high, offset, strict=True)}
+    visit, parent = breadth_first_order(tree, 0, directed=False)
+    potential = np.zeros(nodes, dtype=np.int64)  # P[low] = P[high] + offset(low, high)
+    group = np.zeros(nodes, dtype=np.int64)
+    for node in visit[1:]:
+        up = parent[node]
+        group[node] = node if up == 0 else group[up]
+        if up == 0:
+            continue
+        if (node, up) in tie:
+            potential[node] = potential[up] + tie[(node, up)]
+        else:
+            potential[node] = potential[up] - tie[(up, node)]
+    sizes = np.bincount(region.ravel(), minlength=count + 1)[involved]
+    for root in np.unique(group[1:]):
+        inside = np.flatnonzero(group == root)
+        values, where = np.unique(potential[inside], return_inverse=True)
+        reference = values[np.argmax(np.bincount(where, weights=sizes[inside - 1]))]
+        offsets[involved[inside - 1]] = reference - potential[inside]
+    return offsets

@@ -7,8 +7,9 @@ Camera: radiance -> exposure -> (noise) -> digital numbers (8, 10, 12 or 16 bit)
   exposure scales the radiance of a full-on (white) projector frame so that its
   ``auto_percentile``-th percentile over the pixels that receive light reaches
   ``auto_target`` of full scale.
-* Noise: additive Gaussian read noise of ``read_noise_dn`` digital numbers (standard
-  deviation, before quantisation). The full EMVA 1288 model builds on the same streams.
+* Noise: the EMVA 1288 linear model (:class:`Sensor`): shot noise, dark noise, dark
+  current, DSNU, PRNU, full well, gain, black level, ADC; presets in :data:`SENSOR_PRESETS`
+  and sensor files (:func:`load_sensor`).
 
 Randomness is counter-based: the noise of pixel ``p`` in frame ``f`` is element
 ``p mod NOISE_BLOCK_PIXELS`` of a block of standard normals drawn from a Philox generator
@@ -21,8 +22,9 @@ Frames of 10, 12 and 16 bits are stored as uint16, 8-bit frames as uint8.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from enum import StrEnum
+from pathlib import Path
 from types import ModuleType
 from typing import Any, Literal
 
@@ -30,6 +32,7 @@ import numpy as np
 
 from virtus.checks import positive
 from virtus.errors import InputError, VirtusError
+from virtus.safeio import check_keys
 
 #: Camera ADC bit depths.
 BIT_DEPTHS = (8, 10, 12, 16)
@@ -97,9 +100,34 @@ def standard_normal(seed: int, frame: int, pixels: slice) -> np.ndarray:
     return values[offset : offset + stop - start]
 
 
+#: Stream "frame" indices of the fixed-pattern noise maps (beyond any real frame index):
+#: the same for every capture of one sensor, as a real sensor's pattern is.
+_PRNU_STREAM = 1 << 40
+_DSNU_STREAM = (1 << 40) + 1
+
+
 @dataclass(frozen=True)
 class Sensor:
-    """The camera: linear response, exposure, read noise and quantisation.
+    """The camera: exposure, the EMVA 1288 linear sensor model, and the ADC.
+
+    With ``system_gain_dn_per_e`` None the sensor is ideal (noise-free, linear,
+    ``DN = round(exposure L)``). With it, the EMVA 1288 model (parameters named as a
+    datasheet names them) turns the radiance of each pixel into digital numbers:
+
+    * signal electrons ``mu_e = exposure L (1 + PRNU_i) / K`` (the exposure is in DN per
+      unit radiance, so ``exposure / (K eta)`` photons per unit radiance hit the pixel);
+    * dark electrons ``mu_d = I_dark t_exp + DSNU_i``;
+    * temporal noise: shot noise of signal and dark current (Poisson, drawn as a Gaussian of
+      the same variance: exact in mean and variance, which is what EMVA 1288 measures) plus
+      dark (read) noise ``sigma_d``;
+    * the well clips at ``saturation_capacity_e`` (the dark noise of the read-out is not
+      clipped at zero: the black level keeps it in range); ``DN = round(K n + black_level_dn)``,
+      clipped to ``[0, 2**bit_depth - 1]``.
+
+    So ``mu_y = K (mu_d + eta mu_p) + black`` and ``sigma_y^2 = K^2 sigma_d^2 + sigma_q^2 +
+    K (mu_y - mu_y.dark)`` (EMVA 1288 release 4, the linear model; sigma_q^2 = 1/12 DN^2).
+    PRNU and DSNU are per-pixel, fixed for a sensor (``fixed_pattern_seed``), the same in
+    every frame and capture.
 
     Parameters
     ----------
@@ -107,14 +135,35 @@ class Sensor:
     exposure : digital numbers per unit radiance (> 0), or ``"auto"``.
     auto_percentile : percentile (0-100] of the white frame used by auto-exposure.
     auto_target : fraction (0-1] of full scale that this percentile is mapped to.
-    read_noise_dn : standard deviation of additive Gaussian noise, DN (>= 0; 0 = noise-free).
+    quantum_efficiency : eta, electrons per photon (0-1]; sets the photon count a given
+        signal needs (reported), not the signal itself.
+    system_gain_dn_per_e : K, DN per electron; None = ideal noise-free sensor.
+    dark_noise_e : sigma_d, temporal dark noise, electrons.
+    saturation_capacity_e : full well, electrons (None: only the ADC saturates).
+    dark_current_e_per_s : mean dark current, electrons per second.
+    exposure_time_s : exposure time, seconds (for the dark current).
+    dsnu_e : dark signal non-uniformity, standard deviation over pixels, electrons.
+    prnu : photo-response non-uniformity, standard deviation of the relative gain (0.01 = 1 %).
+    black_level_dn : offset added before the ADC, DN (keeps dark noise above 0).
+    fixed_pattern_seed : seed of the PRNU and DSNU maps.
+    name : preset name, for reports.
     """
 
     bit_depth: int = 8
     exposure: float | Literal["auto"] = "auto"
     auto_percentile: float = 99.0
     auto_target: float = 0.9
-    read_noise_dn: float = 0.0
+    quantum_efficiency: float = 1.0
+    system_gain_dn_per_e: float | None = None
+    dark_noise_e: float = 0.0
+    saturation_capacity_e: float | None = None
+    dark_current_e_per_s: float = 0.0
+    exposure_time_s: float = 0.0
+    dsnu_e: float = 0.0
+    prnu: float = 0.0
+    black_level_dn: float = 0.0
+    fixed_pattern_seed: int = 0
+    name: str = "custom"
 
     def __post_init__(self) -> None:
         if isinstance(self.bit_depth, bool) or self.bit_depth not in BIT_DEPTHS:
@@ -125,12 +174,39 @@ class Sensor:
             raise InputError("auto_percentile", "a percentile in (0, 100]", self.auto_percentile)
         if not 0 < self.auto_target <= 1:
             raise InputError("auto_target", "a fraction in (0, 1]", self.auto_target)
-        noise = self.read_noise_dn
-        if isinstance(noise, bool) or not isinstance(noise, int | float) or not noise >= 0:
-            raise InputError("read_noise_dn", "a finite number >= 0 (DN)", noise)
-        if not np.isfinite(noise):
-            raise InputError("read_noise_dn", "a finite number >= 0 (DN)", noise)
-        object.__setattr__(self, "read_noise_dn", float(noise))
+        eta = positive("quantum_efficiency", self.quantum_efficiency)
+        if eta > 1:
+            raise InputError("quantum_efficiency", "a fraction in (0, 1]", eta)
+        object.__setattr__(self, "quantum_efficiency", eta)
+        if self.system_gain_dn_per_e is not None:
+            gain = positive("system_gain_dn_per_e", self.system_gain_dn_per_e)
+            object.__setattr__(self, "system_gain_dn_per_e", gain)
+        if self.saturation_capacity_e is not None:
+            well = positive("saturation_capacity_e", self.saturation_capacity_e)
+            object.__setattr__(self, "saturation_capacity_e", well)
+        for name in ("dark_noise_e", "dark_current_e_per_s", "exposure_time_s", "dsnu_e",
+                     "prnu", "black_level_dn"):  # fmt: skip
+            object.__setattr__(self, name, _non_negative(name, getattr(self, name)))
+        if self.prnu >= 1:
+            raise InputError("prnu", "a relative deviation < 1", self.prnu)
+        if self.black_level_dn >= self.full_scale:
+            raise InputError(
+                "black_level_dn", f"< full scale {self.full_scale}", self.black_level_dn
+            )
+        object.__setattr__(self, "fixed_pattern_seed", as_seed(self.fixed_pattern_seed))
+        if not isinstance(self.name, str) or not self.name:
+            raise InputError("name", "a non-empty string", self.name)
+        noisy = any((self.dark_noise_e, self.dark_current_e_per_s * self.exposure_time_s,
+                     self.dsnu_e, self.prnu, self.saturation_capacity_e))  # fmt: skip
+        if noisy and self.system_gain_dn_per_e is None:
+            raise InputError(
+                "system_gain_dn_per_e", "a gain (DN/e-) for a sensor with noise or a full well",
+                None,
+            )  # fmt: skip
+
+    def with_(self, **changes: Any) -> Sensor:
+        """A copy with some parameters replaced (checked again)."""
+        return replace(self, **changes)
 
     @property
     def full_scale(self) -> int:
@@ -144,8 +220,8 @@ class Sensor:
 
     @property
     def noisy(self) -> bool:
-        """True when digitisation draws random numbers."""
-        return self.read_noise_dn > 0
+        """True when digitisation follows the EMVA model (draws random numbers)."""
+        return self.system_gain_dn_per_e is not None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready parameters (the capture's ``sensor`` entry)."""
@@ -155,17 +231,14 @@ class Sensor:
 
     @classmethod
     def from_dict(cls, data: object) -> Sensor:
-        """Inverse of :meth:`to_dict`; unknown keys are refused."""
-        if not isinstance(data, dict):
-            raise InputError("sensor", "a mapping of sensor parameters", data)
+        """Inverse of :meth:`to_dict` (also a sensor file's content); unknown keys are
+        refused."""
         fields = set(cls.__dataclass_fields__)
-        unknown = sorted(set(data) - fields - {"noise_stream"})
-        if unknown:
-            raise InputError("sensor", f"keys among {sorted(fields)}", unknown)
-        stream = data.get("noise_stream", NOISE_STREAM)
+        check_keys(data, sorted(fields | {"noise_stream"}), "sensor")
+        stream = data.get("noise_stream", NOISE_STREAM)  # type: ignore[union-attr]
         if stream != NOISE_STREAM:
             raise InputError("sensor.noise_stream", NOISE_STREAM, stream)
-        return cls(**{key: data[key] for key in fields if key in data})
+        return cls(**{key: data[key] for key in fields if key in data})  # type: ignore[index]
 
     def exposure_for(self, white: np.ndarray) -> float:
         """Digital numbers per unit radiance for this sensor.
@@ -198,7 +271,7 @@ class Sensor:
         Parameters
         ----------
         radiance : (F, n) float32 radiance of frames ``frames`` at the row-major pixel
-            indices ``pixels`` (or any shape when the sensor is noise-free).
+            indices ``pixels`` (or any shape when the sensor is ideal).
         exposure : digital numbers per unit radiance.
         seed : seed of the counter-based noise streams.
         frames : (F,) int frame indices in the sequence (needed with noise).
@@ -215,17 +288,104 @@ class Sensor:
                     "digitize", "(F, n) radiance with frames and pixels for a noisy sensor",
                     f"shape {values.shape}",
                 )  # fmt: skip
-            sigma = np.float32(self.read_noise_dn)
-            for row, frame in enumerate(np.asarray(frames).reshape(-1)):
-                values[row] += sigma * standard_normal(seed, int(frame), pixels)
+            values = self._electrons_to_dn(values, seed, np.asarray(frames).reshape(-1), pixels)
         # rint rounds half to even; values above full scale saturate, below zero clip.
         np.rint(values, out=values)
         np.clip(values, 0, self.full_scale, out=values)
         return values.astype(self.dtype)
 
+    def _electrons_to_dn(
+        self, signal_dn: np.ndarray, seed: int, frames: np.ndarray, pixels: slice
+    ) -> np.ndarray:
+        """EMVA model of a (F, n) block whose noise-free signal is ``signal_dn`` (DN)."""
+        gain = np.float32(self.system_gain_dn_per_e)
+        electrons = signal_dn / gain
+        if self.prnu:
+            electrons *= 1 + np.float32(self.prnu) * standard_normal(
+                self.fixed_pattern_seed, _PRNU_STREAM, pixels
+            )
+        dark_current = np.float32(self.dark_current_e_per_s * self.exposure_time_s)
+        variance = np.maximum(electrons, 0) + dark_current + np.float32(self.dark_noise_e**2)
+        sigma = np.sqrt(variance, dtype=np.float32)
+        for row, frame in enumerate(frames):
+            electrons[row] += sigma[row] * standard_normal(seed, int(frame), pixels)
+        electrons += dark_current
+        if self.dsnu_e:
+            electrons += np.float32(self.dsnu_e) * standard_normal(
+                self.fixed_pattern_seed, _DSNU_STREAM, pixels
+            )
+        if self.saturation_capacity_e is not None:
+            # Only the top is clipped: the dark (read) noise is added after the well, and
+            # the black level keeps it above zero DN.
+            np.minimum(electrons, np.float32(self.saturation_capacity_e), out=electrons)
+        return electrons * gain + np.float32(self.black_level_dn)
+
     def digitize_jit(self, radiance: Any, exposure: float, dr: ModuleType) -> Any:
         """:meth:`digitize` of a noise-free sensor on a Dr.Jit Float array (on the device
         that traced it); returns a Float of whole digital numbers in [0, full scale]."""
         if self.noisy:
-            raise VirtusError("digitize_jit: noisy sensors digitise on the host streams")
+            raise VirtusError("digitize_jit: the EMVA model digitises on the host streams")
         return dr.clip(dr.round(radiance * float(exposure)), 0.0, float(self.full_scale))
+
+
+def _non_negative(name: str, value: object) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
+        raise InputError(name, "a finite number >= 0", value)
+    if value < 0:
+        raise InputError(name, "a finite number >= 0", value)
+    return float(value)
+
+
+#: Named sensors for ``--sensor NAME``. ``ideal`` and ``paper`` are noise-free 8-bit sensors
+#: (the paper's renderer models no sensor effect); ``imx174`` is a 12-bit machine-vision
+#: camera with the published EMVA 1288 figures of the Sony IMX174 (eta 77 % at 525 nm,
+#: sigma_d 6.8 e-, full well 32,691 e-; gain set so the full well fills the 12-bit range;
+#: PRNU 0.5 %, DSNU 1 e-, typical of its datasheets); ``webcam`` is an 8-bit consumer-class
+#: CMOS sensor with representative, not one datasheet's, values (small 6,000 e- well, 12 e-
+#: dark noise, 1.5 % PRNU, 4 e- DSNU, 50 e-/s dark current at 33 ms).
+SENSOR_PRESETS: dict[str, Sensor] = {
+    "ideal": Sensor(name="ideal"),
+    "paper": Sensor(name="paper"),
+    "imx174": Sensor(
+        name="imx174",
+        bit_depth=12,
+        quantum_efficiency=0.77,
+        system_gain_dn_per_e=4095 / 32691,
+        dark_noise_e=6.8,
+        saturation_capacity_e=32691.0,
+        dark_current_e_per_s=10.0,
+        exposure_time_s=0.01,
+        dsnu_e=1.0,
+        prnu=0.005,
+        black_level_dn=16.0,
+    ),
+    "webcam": Sensor(
+        name="webcam",
+        bit_depth=8,
+        quantum_efficiency=0.5,
+        system_gain_dn_per_e=255 / 6000,
+        dark_noise_e=12.0,
+        saturation_capacity_e=6000.0,
+        dark_current_e_per_s=50.0,
+        exposure_time_s=0.033,
+        dsnu_e=4.0,
+        prnu=0.015,
+        black_level_dn=4.0,
+    ),
+}
+
+
+def load_sensor(spec: str | Path) -> Sensor:
+    """A sensor by preset name (:data:`SENSOR_PRESETS`) or from a YAML/JSON file of
+    :class:`Sensor` parameters (unknown keys refused)."""
+    from virtus.safeio import read_yaml
+
+    if isinstance(spec, str) and spec in SENSOR_PRESETS:
+        return SENSOR_PRESETS[spec]
+    path = Path(spec)
+    if not path.is_file():
+        raise InputError(
+            "sensor", f"a preset name ({', '.join(SENSOR_PRESETS)}) or a sensor file", str(spec)
+        )
+    data = read_yaml(path, "sensor file", expect=dict)
+    return Sensor.from_dict({"name": path.stem, **data})

@@ -11,9 +11,9 @@ import typer
 from virtus.cli.options import (
     BitDepthOption,
     LookupOption,
-    NoiseOption,
     RigOption,
     SeedOption,
+    SensorOption,
     SequenceOption,
     SppOption,
     VariantOption,
@@ -31,11 +31,11 @@ def register(app: typer.Typer) -> None:
         ] = None,
         out: Annotated[Path, typer.Option(help="Capture directory to write.")] = Path("capture"),
         spp: SppOption = 4,
-        bit_depth: BitDepthOption = 8,
+        bit_depth: BitDepthOption = None,
         lookup: LookupOption = Lookup.nearest,
         rig: RigOption = None,
         sequence: SequenceOption = None,
-        read_noise: NoiseOption = 0.0,
+        sensor: SensorOption = "ideal",
         seed: SeedOption = 0,
         variant: VariantOption = None,
         overwrite: Annotated[
@@ -50,7 +50,7 @@ def register(app: typer.Typer) -> None:
 
         scanner = build_scanner(
             rig=rig, sequence=sequence, lookup=lookup, spp=spp, bit_depth=bit_depth,
-            read_noise_dn=read_noise, variant=variant,
+            sensor=sensor, variant=variant,
         )  # fmt: skip
         the_scene = load_scene(scene) if scene is not None else default_scene()
         start = time.perf_counter()

@@ -9,8 +9,8 @@ import typer
 
 from virtus.cli.options import (
     LookupOption,
-    NoiseOption,
     RigOption,
+    SensorOption,
     SequenceOption,
     SppOption,
     VariantOption,
@@ -27,7 +27,7 @@ def register(app: typer.Typer) -> None:
         rig: RigOption = None,
         sequence: SequenceOption = None,
         spp: SppOption = 4,
-        read_noise: NoiseOption = 0.0,
+        sensor: SensorOption = "ideal",
         variant: VariantOption = None,
     ) -> None:
         """Calibrate the paper's rig with its 18 board poses, capture the 100 mm sphere,
@@ -44,7 +44,7 @@ def register(app: typer.Typer) -> None:
         from virtus.pipeline.demo import run_demo
 
         scanner = build_scanner(
-            rig=rig, sequence=sequence, lookup=lookup, spp=spp, read_noise_dn=read_noise,
+            rig=rig, sequence=sequence, lookup=lookup, spp=spp, sensor=sensor,
             variant=variant,
         )  # fmt: skip
         console = Console()

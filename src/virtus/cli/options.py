@@ -46,9 +46,16 @@ UnitsOption = Annotated[
 ]
 LookupOption = Annotated[Lookup, typer.Option(help=LOOKUP_HELP)]
 SppOption = Annotated[int, typer.Option(help="Supersamples per pixel (a square: 1, 4, 9...).")]
-BitDepthOption = Annotated[int, typer.Option(help="Camera ADC bit depth: 8, 10, 12 or 16.")]
-NoiseOption = Annotated[
-    float, typer.Option(help="Camera read noise, DN (standard deviation; 0 = noise-free).")
+BitDepthOption = Annotated[
+    int | None,
+    typer.Option(help="Camera ADC bit depth: 8, 10, 12 or 16 (default: the sensor's)."),
+]
+SensorOption = Annotated[
+    str,
+    typer.Option(
+        help="Camera sensor: a preset (ideal, paper, imx174, webcam) or a YAML/JSON file of "
+        "EMVA 1288 parameters."
+    ),
 ]
 VariantOption = Annotated[
     str | None, typer.Option(help="Mitsuba variant (default: CUDA if it works, else LLVM).")
@@ -81,22 +88,25 @@ def build_scanner(
     sequence: Path | None = None,
     lookup: Lookup = Lookup.nearest,
     spp: int = 4,
-    bit_depth: int = 8,
-    read_noise_dn: float = 0.0,
+    sensor: str = "ideal",
+    bit_depth: int | None = None,
     variant: str | None = None,
 ) -> Scanner:
     """The Scanner the command-line options describe (every job builds it here)."""
     from virtus.devices import Rig, default_rig
     from virtus.scanner import Scanner
-    from virtus.sensor import Sensor
+    from virtus.sensor import load_sensor
 
+    the_sensor = load_sensor(sensor)
+    if bit_depth is not None:
+        the_sensor = the_sensor.with_(bit_depth=bit_depth)
     the_rig = Rig.load_json(rig) if rig is not None else default_rig()
     projector = the_rig.projector.intrinsics
     return Scanner(
         rig=the_rig,
         sequence=load_sequence_option(sequence, projector.width, projector.height),
         lookup=lookup,
-        sensor=Sensor(bit_depth=bit_depth, read_noise_dn=read_noise_dn),
+        sensor=the_sensor,
         spp=spp,
         variant=variant,
     )

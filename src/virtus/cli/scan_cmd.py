@@ -10,9 +10,9 @@ import typer
 from virtus.cli.options import (
     BitDepthOption,
     LookupOption,
-    NoiseOption,
     RigOption,
     SeedOption,
+    SensorOption,
     SequenceOption,
     SppOption,
     UnitsOption,
@@ -43,8 +43,8 @@ def register(app: typer.Typer) -> None:
         sequence: SequenceOption = None,
         spp: SppOption = 4,
         lookup: LookupOption = Lookup.nearest,
-        bit_depth: BitDepthOption = 8,
-        read_noise: NoiseOption = 0.0,
+        bit_depth: BitDepthOption = None,
+        sensor: SensorOption = "ideal",
         seed: SeedOption = 0,
         variant: VariantOption = None,
         turntable: Annotated[
@@ -74,7 +74,7 @@ def register(app: typer.Typer) -> None:
         settings = ScanSettings(seed=as_seed(seed))
         scanner = build_scanner(
             rig=rig, sequence=sequence, lookup=lookup, spp=spp, bit_depth=bit_depth,
-            read_noise_dn=read_noise, variant=variant,
+            sensor=sensor, variant=variant,
         )  # fmt: skip
         # Read the calibration before anything is rendered or written.
         used = (
