@@ -19,9 +19,10 @@ from virtus.cli import main
 from virtus.errors import InputError
 from virtus.patterns import default_sequence, load_sequence_file
 from virtus.pipeline.scan import decode_capture, reconstruct_capture
+from virtus.projection import Lookup
 from virtus.scanner import Scanner
 from virtus.scene import default_scene
-from virtus.sensor import Lookup, Sensor
+from virtus.sensor import Sensor
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "sequences"
 
@@ -198,16 +199,21 @@ def _bad_import_cases(tmp_path: Path, twelve_bit) -> dict[str, tuple[list, str]]
             f for f in data["frames"] if not (f["kind"] == "gray" and f.get("bit") == 6)
         ]
 
-    base = ["import", good, "--calibration", rig, "--out", tmp_path / "out"]
+    def args(images: Path, sequence: Path, calibration: Path) -> list:
+        return ["import", images, "--sequence", sequence, "--calibration", calibration,
+                "--out", tmp_path / "out"]  # fmt: skip
+
     return {
-        "unknown coding": (["import", good, "--sequence", sequence_file("kind", set_first("kind", "wavelet")), "--calibration", rig, "--out", tmp_path / "out"], "kind"),
-        "N < 3": (["import", good, "--sequence", sequence_file("steps", set_first("steps", 2)), "--calibration", rig, "--out", tmp_path / "out"], "steps"),
-        "period <= 0": (["import", good, "--sequence", sequence_file("period", set_first("period", 0)), "--calibration", rig, "--out", tmp_path / "out"], "period"),
-        "too few bits": (["import", good, "--sequence", sequence_file("bits", drop_gray_bit), "--calibration", rig, "--out", tmp_path / "out"], "bit"),
-        "image count": (["import", short, "--sequence", seq, "--calibration", rig, "--out", tmp_path / "out"], "52 images"),
-        "image sizes": (["import", mixed, "--sequence", seq, "--calibration", rig, "--out", tmp_path / "out"], "one size"),
-        "no units": ([*base[:2], "--sequence", seq, "--calibration", no_units, "--out", tmp_path / "out"], "units"),
-        "not a rotation": ([*base[:2], "--sequence", seq, "--calibration", bad_rotation, "--out", tmp_path / "out"], "rotation"),
+        "unknown coding": (args(good, sequence_file("kind", set_first("kind", "wavelet")), rig),
+                           "kind"),
+        "N < 3": (args(good, sequence_file("steps", set_first("steps", 2)), rig), "steps"),
+        "period <= 0": (args(good, sequence_file("period", set_first("period", 0)), rig),
+                        "period"),
+        "too few bits": (args(good, sequence_file("bits", drop_gray_bit), rig), "bit"),
+        "image count": (args(short, seq, rig), "52 images"),
+        "image sizes": (args(mixed, seq, rig), "one size"),
+        "no units": (args(good, seq, no_units), "units"),
+        "not a rotation": (args(good, seq, bad_rotation), "rotation"),
     }  # fmt: skip
 
 

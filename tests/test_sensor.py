@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests import tolerances as tol
 from tests.test_render_support import small_rig
 from virtus.errors import InputError
 from virtus.patterns import default_sequence
+from virtus.phase import wrapped_phase
 from virtus.render import render, trace
 from virtus.render.synthesis import synthesize
 from virtus.scene import default_scene
-from tests import tolerances as tol
-from virtus.phase import wrapped_phase
 from virtus.sensor import (
     NOISE_BLOCK_PIXELS,
     SENSOR_PRESETS,

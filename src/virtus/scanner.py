@@ -19,7 +19,8 @@ from virtus.checks import positive_int
 from virtus.devices import Rig, default_rig
 from virtus.errors import InputError
 from virtus.patterns import PatternSequence, default_sequence
-from virtus.sensor import Lookup, Sensor, as_lookup, as_seed
+from virtus.projection import Lookup, ProjectorModel
+from virtus.sensor import Sensor, as_seed
 from virtus.transforms import Pose
 
 #: Largest supersample count (a 32 x 32 grid): beyond it a pose needs > 10 GB of samples
@@ -37,15 +38,16 @@ class Scanner:
     ----------
     rig : camera, projector and ``proj2cam`` (default: the paper's rig).
     sequence : the projected patterns (default: the paper's 52 frames for the projector).
-    lookup : projector pixel model (:class:`virtus.sensor.Lookup`).
-    sensor : camera model (bit depth, exposure, noise).
+    projector : the projector model (:class:`virtus.projection.ProjectorModel`: response,
+        black level, pixel model and PSF, fall-off; default: ideal sharp DMD pixels).
+    sensor : camera model (:class:`virtus.sensor.Sensor`: bit depth, exposure, EMVA 1288).
     spp : supersamples per camera pixel, a perfect square.
     variant : Mitsuba variant (default: ``$VIRTUS_MITSUBA_VARIANT`` or automatic).
     """
 
     rig: Rig = field(default_factory=default_rig)
     sequence: PatternSequence | None = None
-    lookup: Lookup = Lookup.nearest
+    projector: ProjectorModel = field(default_factory=ProjectorModel)
     sensor: Sensor = field(default_factory=Sensor)
     spp: int = 4
     variant: str | None = None
@@ -66,7 +68,10 @@ class Scanner:
                 f"patterns for the rig's {projector.width}x{projector.height} px projector",
                 f"{self.sequence.width}x{self.sequence.height} px",
             )
-        object.__setattr__(self, "lookup", as_lookup(self.lookup))
+        if not isinstance(self.projector, ProjectorModel):
+            raise InputError(
+                "projector", "a virtus.projection.ProjectorModel", type(self.projector).__name__
+            )
         if not isinstance(self.sensor, Sensor):
             raise InputError("sensor", "a virtus.sensor.Sensor", type(self.sensor).__name__)
         spp = positive_int("spp", self.spp)
@@ -81,6 +86,11 @@ class Scanner:
             )
         object.__setattr__(self, "spp", spp)
 
+    @property
+    def lookup(self) -> Lookup:
+        """The projector's pixel model."""
+        return self.projector.pixel
+
     def with_(self, **changes: Any) -> Scanner:
         """A copy with some fields replaced (checked again)."""
         return replace(self, **changes)
@@ -90,7 +100,7 @@ class Scanner:
         return {
             "rig": self.rig.to_dict(),
             "sequence": self.sequence.to_dict(),  # type: ignore[union-attr]
-            "lookup": self.lookup.value,
+            "projector": self.projector.to_dict(),
             "sensor": self.sensor.to_dict(),
             "spp": self.spp,
             "variant": self.variant,
@@ -130,7 +140,7 @@ class Scanner:
             scene,
             self.sequence,
             spp=self.spp,
-            lookup=self.lookup.value,
+            projector=self.projector,
             variant=self.variant,
             rng=seed,
             cam2world=pose,

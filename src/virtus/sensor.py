@@ -23,7 +23,6 @@ Frames of 10, 12 and 16 bits are stored as uint16, 8-bit frames as uint8.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, replace
-from enum import StrEnum
 from pathlib import Path
 from types import ModuleType
 from typing import Any, Literal
@@ -43,27 +42,6 @@ NOISE_BLOCK_PIXELS = 1 << 14
 MAX_SEED = (1 << 63) - 1
 #: Description of the noise stream, recorded with every capture.
 NOISE_STREAM = f"philox4x64(SeedSequence([seed, frame, pixel // {NOISE_BLOCK_PIXELS}]))"
-
-
-class Lookup(StrEnum):
-    """Projector pixel model: how a pattern is read at a projector coordinate.
-
-    ``nearest``: sharp DMD pixels, the value of the pixel containing the coordinate (a
-    staircase of about 0.15-0.2 projector px RMS in decoded coordinates where a camera pixel
-    is smaller than a projector pixel on the object); ``bilinear``: linear interpolation
-    between pixel centres, as a projector lens that blurs each pixel over about one pixel.
-    """
-
-    nearest = "nearest"
-    bilinear = "bilinear"
-
-
-def as_lookup(value: object) -> Lookup:
-    """``value`` as a :class:`Lookup`, or :class:`InputError` naming ``lookup``."""
-    try:
-        return Lookup(value)
-    except ValueError:
-        raise InputError("lookup", f"one of {[m.value for m in Lookup]}", value) from None
 
 
 def as_seed(rng: np.random.Generator | int | None) -> int:

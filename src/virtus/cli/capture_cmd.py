@@ -11,6 +11,7 @@ import typer
 from virtus.cli.options import (
     BitDepthOption,
     LookupOption,
+    ProjectorOption,
     RigOption,
     SeedOption,
     SensorOption,
@@ -19,7 +20,6 @@ from virtus.cli.options import (
     VariantOption,
     build_scanner,
 )
-from virtus.sensor import Lookup
 
 
 def register(app: typer.Typer) -> None:
@@ -32,7 +32,8 @@ def register(app: typer.Typer) -> None:
         out: Annotated[Path, typer.Option(help="Capture directory to write.")] = Path("capture"),
         spp: SppOption = 4,
         bit_depth: BitDepthOption = None,
-        lookup: LookupOption = Lookup.nearest,
+        lookup: LookupOption = None,
+        projector: ProjectorOption = "ideal",
         rig: RigOption = None,
         sequence: SequenceOption = None,
         sensor: SensorOption = "ideal",
@@ -49,7 +50,8 @@ def register(app: typer.Typer) -> None:
         from virtus.sensor import as_seed
 
         scanner = build_scanner(
-            rig=rig, sequence=sequence, lookup=lookup, spp=spp, bit_depth=bit_depth,
+            rig=rig, sequence=sequence, lookup=lookup, projector=projector, spp=spp,
+            bit_depth=bit_depth,
             sensor=sensor, variant=variant,
         )  # fmt: skip
         the_scene = load_scene(scene) if scene is not None else default_scene()

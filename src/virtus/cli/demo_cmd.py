@@ -9,6 +9,7 @@ import typer
 
 from virtus.cli.options import (
     LookupOption,
+    ProjectorOption,
     RigOption,
     SensorOption,
     SequenceOption,
@@ -16,14 +17,14 @@ from virtus.cli.options import (
     VariantOption,
     build_scanner,
 )
-from virtus.sensor import Lookup
 
 
 def register(app: typer.Typer) -> None:
     @app.command("demo")
     def demo(
         out: Annotated[Path, typer.Option(help="Output directory.")] = Path("virtus-demo"),
-        lookup: LookupOption = Lookup.nearest,
+        lookup: LookupOption = None,
+        projector: ProjectorOption = "ideal",
         rig: RigOption = None,
         sequence: SequenceOption = None,
         spp: SppOption = 4,
@@ -44,7 +45,7 @@ def register(app: typer.Typer) -> None:
         from virtus.pipeline.demo import run_demo
 
         scanner = build_scanner(
-            rig=rig, sequence=sequence, lookup=lookup, spp=spp, sensor=sensor,
+            rig=rig, sequence=sequence, lookup=lookup, projector=projector, spp=spp, sensor=sensor,
             variant=variant,
         )  # fmt: skip
         console = Console()

@@ -8,12 +8,15 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from virtus.sensor import Lookup
+from virtus.projection import Lookup
 
 if TYPE_CHECKING:
     from virtus.scanner import Scanner
 
-LOOKUP_HELP = "Projector pixel model: nearest (sharp DMD pixels) or bilinear (blurred by ~1 px)."
+LOOKUP_HELP = (
+    "Projector pixel model: nearest (sharp DMD pixels), bilinear (blurred by ~1 px) or psf; "
+    "overrides the --projector model's."
+)
 
 #: ``--rig``: the true rig of the virtual scanner.
 RigOption = Annotated[
@@ -44,7 +47,14 @@ UnitsOption = Annotated[
     LengthUnit | None,
     typer.Option(help="Length unit of a calibration file that states none: mm or m."),
 ]
-LookupOption = Annotated[Lookup, typer.Option(help=LOOKUP_HELP)]
+LookupOption = Annotated[Lookup | None, typer.Option(help=LOOKUP_HELP)]
+ProjectorOption = Annotated[
+    str,
+    typer.Option(
+        help="Projector model: a preset (ideal, paper, lightcrafter) or a YAML/JSON file "
+        "(gamma, contrast_ratio, pixel, fill_factor, psf_sigma_px, falloff, ...)."
+    ),
+]
 SppOption = Annotated[int, typer.Option(help="Supersamples per pixel (a square: 1, 4, 9...).")]
 BitDepthOption = Annotated[
     int | None,
@@ -86,7 +96,8 @@ def build_scanner(
     *,
     rig: Path | None = None,
     sequence: Path | None = None,
-    lookup: Lookup = Lookup.nearest,
+    lookup: Lookup | None = None,
+    projector: str = "ideal",
     spp: int = 4,
     sensor: str = "ideal",
     bit_depth: int | None = None,
@@ -94,18 +105,22 @@ def build_scanner(
 ) -> Scanner:
     """The Scanner the command-line options describe (every job builds it here)."""
     from virtus.devices import Rig, default_rig
+    from virtus.projection import load_projector
     from virtus.scanner import Scanner
     from virtus.sensor import load_sensor
 
     the_sensor = load_sensor(sensor)
     if bit_depth is not None:
         the_sensor = the_sensor.with_(bit_depth=bit_depth)
+    the_projector = load_projector(projector)
+    if lookup is not None:
+        the_projector = the_projector.with_(pixel=lookup)
     the_rig = Rig.load_json(rig) if rig is not None else default_rig()
     projector = the_rig.projector.intrinsics
     return Scanner(
         rig=the_rig,
         sequence=load_sequence_option(sequence, projector.width, projector.height),
-        lookup=lookup,
+        projector=the_projector,
         sensor=the_sensor,
         spp=spp,
         variant=variant,

@@ -10,6 +10,7 @@ import typer
 from virtus.cli.options import (
     BitDepthOption,
     LookupOption,
+    ProjectorOption,
     RigOption,
     SeedOption,
     SensorOption,
@@ -20,7 +21,6 @@ from virtus.cli.options import (
     build_scanner,
 )
 from virtus.paper import C2M_MAE_MM
-from virtus.sensor import Lookup
 
 
 def register(app: typer.Typer) -> None:
@@ -42,7 +42,8 @@ def register(app: typer.Typer) -> None:
         rig: RigOption = None,
         sequence: SequenceOption = None,
         spp: SppOption = 4,
-        lookup: LookupOption = Lookup.nearest,
+        lookup: LookupOption = None,
+        projector: ProjectorOption = "ideal",
         bit_depth: BitDepthOption = None,
         sensor: SensorOption = "ideal",
         seed: SeedOption = 0,
@@ -73,7 +74,8 @@ def register(app: typer.Typer) -> None:
 
         settings = ScanSettings(seed=as_seed(seed))
         scanner = build_scanner(
-            rig=rig, sequence=sequence, lookup=lookup, spp=spp, bit_depth=bit_depth,
+            rig=rig, sequence=sequence, lookup=lookup, projector=projector, spp=spp,
+            bit_depth=bit_depth,
             sensor=sensor, variant=variant,
         )  # fmt: skip
         # Read the calibration before anything is rendered or written.

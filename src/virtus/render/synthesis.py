@@ -5,17 +5,22 @@ projector axis only, so a frame's radiance at camera pixel p is
 
     L_f(p) = sum_s w_s(p) * profile_f(c_s(p)) + L_ambient(p),
 
-with ``w_s`` the white-projector radiance of sample s and ``c_s`` its projector column
-(``u_p``, frames of direction "v") or row (``v_p``, direction "h"). For all frames of one
-direction this is one sparse (pixels x projector columns) matrix times a dense
+with ``w_s`` the white-projector radiance of sample (tap) s and ``c_s`` its projector
+column (``u_p``, frames of direction "v") or row (``v_p``, direction "h"). For all frames of
+one direction this is one sparse (pixels x projector columns) matrix times a dense
 (columns x frames) profile matrix.
 
-Pattern lookup
---------------
+The profile of a frame is the light the projector emits
+(:meth:`virtus.projection.ProjectorModel.emitted_profile`: pre-compensation, response, black
+level); the projector's fall-off scales each tap's weight. Pixel models
+(:class:`virtus.projection.Lookup`):
+
 * ``"nearest"``: the DMD pixel containing the point, ``floor(c + 0.5)`` (pixel j covers
   [j - 0.5, j + 0.5)); this is the physical staircase of a DMD.
 * ``"bilinear"``: linear interpolation between projector pixel centres, clamped to the edge
   pixels' values in the outer half pixel.
+* ``"psf"``: linear interpolation in the profile spread by the pixel aperture and lens PSF,
+  tabulated at several points per pixel (:meth:`~virtus.projection.ProjectorModel.spread`).
 """
 
 from __future__ import annotations
@@ -30,10 +35,10 @@ import scipy.sparse
 
 from virtus.checks import positive_int
 from virtus.errors import InputError
+from virtus.projection import Lookup, ProjectorModel
 from virtus.render.tracing import Trace
-from virtus.sensor import Lookup
 
-#: The projector pixel models (:class:`virtus.sensor.Lookup`).
+#: The projector pixel models (:class:`virtus.projection.Lookup`).
 LOOKUPS = tuple(member.value for member in Lookup)
 #: Pixels per block of the sparse product: (block x frames) float32 fits in L2 cache.
 _BLOCK_PIXELS = 1 << 14
@@ -49,13 +54,14 @@ def lookup_matrix(
     coordinate : (P, S) float32 projector coordinate (u_p or v_p, pixels) of each sample.
     weight : (P, S) float32 radiance weight of each sample (0 = no contribution).
     length : projector width (for u_p) or height (for v_p) in pixels.
-    lookup : ``"nearest"`` or ``"bilinear"`` (see the module docstring).
+    lookup : ``"nearest"`` or ``"bilinear"`` (see the module docstring; the ``psf`` model
+        reads its table bilinearly).
 
     Every sample keeps its entries (S per row for nearest, 2 S for bilinear), zero weights
     included: a fixed row length needs no compaction pass and costs little in the product.
     """
-    if lookup not in LOOKUPS:
-        raise InputError("lookup", f"one of {LOOKUPS}", lookup)
+    if lookup not in (Lookup.nearest, Lookup.bilinear):
+        raise InputError("lookup", '"nearest" or "bilinear"', lookup)
     n_pixels, n_samples = coordinate.shape
     c = coordinate.reshape(-1)
     w = weight.reshape(-1).astype(np.float32, copy=False)
@@ -107,11 +113,35 @@ def frame_groups(sequence: Any) -> dict[str | None, list[int]]:
     return groups
 
 
-def _profiles(sequence: Any, indices: list[int], length: int) -> np.ndarray:
-    """(length, F) float32 matrix of the frames' 1-D profiles."""
+def projector_groups(sequence: Any, projector: ProjectorModel) -> dict[str | None, list[int]]:
+    """:func:`frame_groups` for synthesis: with the ``psf`` pixel model the uniform frames
+    join a fringe direction (as constant profiles), since a lit DMD shows its pixel
+    structure too (dark gaps with a fill factor below 1)."""
+    groups = frame_groups(sequence)
+    if projector.pixel == Lookup.psf and groups[None]:
+        carrier = "v" if groups["v"] or not groups["h"] else "h"
+        groups[carrier] = sorted(groups[carrier] + groups[None])
+        groups[None] = []
+    return groups
+
+
+def as_projector(projector: ProjectorModel | str) -> ProjectorModel:
+    """A :class:`ProjectorModel`, or the ideal one with the pixel model ``projector`` names."""
+    if isinstance(projector, ProjectorModel):
+        return projector
+    return ProjectorModel(pixel=projector)  # type: ignore[arg-type]
+
+
+def emitted_profiles(
+    projector: ProjectorModel, sequence: Any, indices: list[int], length: int
+) -> np.ndarray:
+    """(length * R, F) float32 table of the light the frames emit along their axis (R = the
+    pixel model's supersampling, 1 for nearest and bilinear)."""
     columns = []
     for index in indices:
-        profile = np.asarray(sequence.profile(index), dtype=np.float32)
+        profile = projector.emitted_profile(sequence, index)
+        if sequence.frames[index].direction is None:
+            profile = np.full(length, profile.reshape(-1)[0])
         if profile.shape != (length,):
             raise InputError(
                 f"sequence.profile({index})",
@@ -119,18 +149,28 @@ def _profiles(sequence: Any, indices: list[int], length: int) -> np.ndarray:
                 f"shape {profile.shape}",
             )
         columns.append(profile)
-    return np.stack(columns, axis=1)
+    return projector.spread(np.stack(columns, axis=1)).astype(np.float32)
+
+
+def tap_weights(trace: Trace, projector: ProjectorModel, intrinsics: Any | None) -> np.ndarray:
+    """(P, S) float32 tap weights with the projector's fall-off applied."""
+    if projector.falloff == "none":
+        return trace.weight
+    if intrinsics is None:
+        raise InputError("projector_intrinsics", "the projector's intrinsics for a fall-off", None)
+    return trace.weight * projector.falloff_factor(trace.u_p, trace.v_p, intrinsics)
 
 
 def synthesize(
     trace: Trace,
     sequence: Any,
-    lookup: str = "nearest",
+    projector: ProjectorModel | str = "nearest",
     *,
     transform: Callable[[np.ndarray, np.ndarray, slice], np.ndarray] | None = None,
     dtype: Any = np.float32,
     threads: int | None = None,
     block_pixels: int = _BLOCK_PIXELS,
+    projector_intrinsics: Any | None = None,
 ) -> np.ndarray:
     """Every frame of ``sequence`` from one trace.
 
@@ -140,7 +180,8 @@ def synthesize(
     sequence : a pattern sequence (``virtus.patterns``): ``frames[i].direction`` in
         {"v", "h", None} and ``profile(i)`` -> (L,) values in [0, 1] along the varying axis
         (L = projector width for "v", height for "h", 1 for uniform frames).
-    lookup : ``"nearest"`` (DMD pixels, default) or ``"bilinear"``.
+    projector : the projector model (:class:`virtus.projection.ProjectorModel`), or just a
+        pixel model name for an otherwise ideal projector (``"nearest"``: DMD pixels).
     transform : optional pointwise function ``transform(block, frames, pixels)`` applied to
         each block of radiance before it is stored (e.g. a sensor's digitisation), where
         ``block`` is (len(frames), n) float32, ``frames`` the block's frame indices in the
@@ -151,14 +192,14 @@ def synthesize(
     dtype : dtype of the result (that of ``transform``'s output).
     threads : worker threads (default: the CPUs this process may use).
     block_pixels : pixels per block of the sparse product (the result does not depend on it).
+    projector_intrinsics : the projector's intrinsics (needed for a fall-off).
 
     Returns
     -------
     (F, H, W) frames in sequence order: radiance (float32, same units as ``trace.weight``),
     or ``transform`` of it.
     """
-    if lookup not in LOOKUPS:
-        raise InputError("lookup", f"one of {LOOKUPS}", lookup)
+    projector = as_projector(projector)
     threads = _threads() if threads is None else positive_int("threads", threads)
     block_pixels = positive_int("block_pixels", block_pixels)
     n_frames = len(sequence.frames)
@@ -169,17 +210,26 @@ def synthesize(
     transform = transform or (lambda block, frames, pixels: block)
     ambient = trace.ambient if np.any(trace.ambient) else None
     out = np.empty((n_frames, n_pixels), dtype=dtype)
-    groups = frame_groups(sequence)
+    groups = projector_groups(sequence, projector)
     lengths = {"v": trace.projector_width, "h": trace.projector_height}
     coordinates = {"v": trace.u_p, "h": trace.v_p}
     directions = [d for d in ("v", "h") if groups[d]]
-    profiles = {d: _profiles(sequence, groups[d], lengths[d]) for d in directions}
+    profiles = {d: emitted_profiles(projector, sequence, groups[d], lengths[d]) for d in directions}
+    weight = tap_weights(trace, projector, projector_intrinsics)
+    read = Lookup.bilinear if projector.pixel == Lookup.psf else projector.pixel
+    table = projector.supersampling
+
+    def matrix(direction: str) -> scipy.sparse.csr_array:
+        position = (
+            projector.table_coordinate(coordinates[direction])
+            if table > 1
+            else (coordinates[direction])
+        )
+        return lookup_matrix(position, weight, lengths[direction] * table, read)
+
     # Both directions' matrices are built at once (numpy releases the GIL).
     with ThreadPoolExecutor(max_workers=min(2, threads)) as pool:
-        matrices = dict(zip(directions, pool.map(
-            lambda d: lookup_matrix(coordinates[d], trace.weight, lengths[d], lookup),
-            directions,
-        ), strict=True))  # fmt: skip
+        matrices = dict(zip(directions, pool.map(matrix, directions), strict=True))
     for direction in directions:
         _fill_direction(
             out,
@@ -192,9 +242,9 @@ def synthesize(
             block_pixels,
         )
     if groups[None]:
-        white = trace.direct
+        white = trace.direct if weight is trace.weight else weight.sum(axis=1)
         for index in groups[None]:
-            level = np.asarray(sequence.profile(index), dtype=np.float32).reshape(-1)
+            level = projector.emitted_profile(sequence, index).astype(np.float32).reshape(-1)
             if level.shape != (1,):
                 raise InputError(f"sequence.profile({index})", "shape (1,)", level.shape)
             frame = white * level[0]

@@ -14,8 +14,14 @@ from typing import Any
 import numpy as np
 
 from virtus.errors import InputError
+from virtus.projection import Lookup, ProjectorModel
 from virtus.render.backend import mitsuba
-from virtus.render.synthesis import LOOKUPS, frame_groups
+from virtus.render.synthesis import (
+    as_projector,
+    emitted_profiles,
+    projector_groups,
+    tap_weights,
+)
 from virtus.render.tracing import Trace
 from virtus.sensor import Sensor
 
@@ -23,10 +29,11 @@ from virtus.sensor import Sensor
 def synthesize_digital(
     trace: Trace,
     sequence: Any,
-    lookup: str,
+    projector: ProjectorModel | str,
     sensor: Sensor,
     exposure: float,
     seed: int = 0,
+    projector_intrinsics: Any | None = None,
 ) -> np.ndarray:
     """Digital frames (F, H, W) of ``sequence`` from ``trace``, synthesised with Dr.Jit in the
     variant that traced it; same result as :func:`virtus.render.synthesis.synthesize`
@@ -34,13 +41,14 @@ def synthesize_digital(
     sensor digitises each frame on the host from the counter-based streams of ``seed``, so
     its noise is the same as on the CPU path.
     """
-    if lookup not in LOOKUPS:
-        raise InputError("lookup", f"one of {LOOKUPS}", lookup)
+    projector = as_projector(projector)
     mi, dr, _ = mitsuba(trace.variant)
     n_frames = len(sequence.frames)
     n_pixels, spp = trace.weight.shape
-    groups = frame_groups(sequence)
-    weight = mi.Float(trace.weight.reshape(-1))
+    groups = projector_groups(sequence, projector)
+    weight = mi.Float(tap_weights(trace, projector, projector_intrinsics).reshape(-1))
+    table = projector.supersampling
+    read = Lookup.bilinear if projector.pixel == Lookup.psf else projector.pixel
     ambient = mi.Float(trace.ambient) if np.any(trace.ambient) else None
     lengths = {"v": trace.projector_width, "h": trace.projector_height}
     out = np.empty((n_frames, n_pixels), dtype=sensor.dtype)
@@ -60,9 +68,11 @@ def synthesize_digital(
     for direction, coordinate in (("v", trace.u_p), ("h", trace.v_p)):
         if not groups[direction]:
             continue
-        length = lengths[direction]
-        c = mi.Float(coordinate.reshape(-1))
-        if lookup == "nearest":
+        length = lengths[direction] * table
+        if table > 1:
+            coordinate = projector.table_coordinate(coordinate)
+        c = mi.Float(np.ascontiguousarray(coordinate, dtype=np.float32).reshape(-1))
+        if read == Lookup.nearest:
             taps = [(mi.UInt32(dr.clip(dr.floor(c + 0.5), 0, length - 1)), weight)]
         else:
             x = dr.clip(c, 0.0, float(length - 1))
@@ -72,19 +82,15 @@ def synthesize_digital(
             taps = [(mi.UInt32(left), weight * (1.0 - frac)), (mi.UInt32(right), weight * frac)]
         for column, tap_weight in taps:
             dr.eval(column, tap_weight)
-        for index in groups[direction]:
-            profile = mi.Float(np.asarray(sequence.profile(index), dtype=np.float32))
-            if dr.width(profile) != length:
-                raise InputError(
-                    f"sequence.profile({index})", f"shape ({length},) for this projector",
-                    f"shape ({dr.width(profile)},)",
-                )  # fmt: skip
+        profiles = emitted_profiles(projector, sequence, groups[direction], lengths[direction])
+        for k, index in enumerate(groups[direction]):
+            profile = mi.Float(np.ascontiguousarray(profiles[:, k]))
             values = sum(dr.gather(mi.Float, profile, col) * w for col, w in taps)
             finish(index, dr.block_sum(values, spp))
     if groups[None]:
         direct = dr.block_sum(weight, spp)
         for index in groups[None]:
-            level = np.asarray(sequence.profile(index), dtype=np.float32).reshape(-1)
+            level = projector.emitted_profile(sequence, index).astype(np.float32).reshape(-1)
             if level.shape != (1,):
                 raise InputError(f"sequence.profile({index})", "shape (1,)", level.shape)
             finish(index, direct * float(level[0]))
