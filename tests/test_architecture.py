@@ -15,7 +15,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "src" / "virtus"
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("__init__", "errors", "checks", "jsonio", "safeio", "paper"),
     ("transforms", "optics", "isaac", "devices"),
-    ("phase", "patterns", "sensor", "groundtruth", "images", "ply", "objects"),
+    ("phase", "patterns", "sensor", "projection", "groundtruth", "images", "ply", "objects"),
     ("scene", "capture", "reconstruct", "metrology", "calib", "runs"),
     ("render",),
     ("scanner",),

@@ -1,24 +1,38 @@
-"""The projector lookup option reaches the calibration captures."""
+"""The scanner's projector model reaches the calibration captures."""
 
 from __future__ import annotations
 
 import pytest
 
-from virtus.calib.episode import calibrate_rig
+import virtus.pipeline.calibrate as job
+from tests.test_calibrate_resume import quarter_rig
 from virtus.cli import main
-from virtus.devices import default_rig
-from virtus.errors import InputError
+from virtus.projection import Lookup, ProjectorModel
+from virtus.scanner import Scanner
 
 
-def test_unknown_lookup_is_refused_before_rendering(tmp_path):
-    with pytest.raises(InputError, match=r"^lookup: expected one of"):
-        calibrate_rig(default_rig(), lookup="cubic", out_dir=tmp_path)
-    assert not (tmp_path / "poses").exists() or not any((tmp_path / "poses").iterdir())
+@pytest.mark.slow
+def test_the_scanners_lookup_makes_every_calibration_capture(tmp_path, monkeypatch):
+    seen = []
+    observe = job.observe_pose
+
+    def recording(capture, board, name):
+        seen.append(capture.render["lookup"])
+        return observe(capture, board, name)
+
+    monkeypatch.setattr(job, "observe_pose", recording)
+    projector = ProjectorModel(pixel=Lookup.bilinear)
+    scanner = Scanner(rig=quarter_rig(), projector=projector, spp=1)
+    result = job.calibrate_rig(scanner, board="4x7", poses="random:3", rng=1, out_dir=tmp_path)
+    assert seen == ["bilinear"] * 3
+    assert result.settings["lookup"] == "bilinear"
+    assert result.settings["projector"] == projector.to_dict()
 
 
 @pytest.mark.parametrize("command", ["calibrate", "demo", "scan", "capture"])
-def test_cli_lookup_choices(command, capsys):
+def test_cli_lookup_choices(command, capsys, tmp_path):
     with pytest.raises(SystemExit) as exit_info:
-        main([command, "--lookup", "cubic"])
+        main([command, "--lookup", "cubic", "--out", str(tmp_path / "out")])
     assert exit_info.value.code == 2
     assert "cubic" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()  # refused before anything is written

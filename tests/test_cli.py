@@ -15,11 +15,11 @@ BAD_INVOCATIONS = [
     (["decode"], "Missing argument"),
     # bad values found by the library before any rendering
     (["capture", "--spp", "3"], "spp: expected a perfect square"),
-    (["capture", "--bit-depth", "12"], "bit_depth: expected 8 or 16"),
+    (["capture", "--bit-depth", "14"], "bit_depth: expected one of (8, 10, 12, 16)"),
     (["calibrate", "--board", "4x6"], "cols: expected an odd number of columns"),
-    (["calibrate", "--poses", "random:0"], "n: expected an integer >= 1"),
+    (["calibrate", "--poses", "random:0"], "poses: expected 'paper' or 'random:N' with 3 <= N"),
     (["capture", "--scene", "missing.yaml"], "scene: expected an existing YAML file"),
-    (["rig", "info", "--rig", "missing.json"], "No such file or directory"),
+    (["rig", "info", "--rig", "missing.json"], "rig: expected an existing JSON file"),
 ]
 
 

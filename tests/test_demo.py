@@ -35,7 +35,7 @@ def test_demo_meets_the_issue_targets(tmp_path: Path, capsys) -> None:
     assert metrics["provenance"]["versions"]["virtus"]
 
     # The files a user opens.
-    calib = json.loads((out / "calibration.json").read_text())
+    calib = json.loads((out / "calibration" / "calibration.json").read_text())
     assert {"camera", "projector", "proj2cam", "rms_px"} <= set(calib)
     assert (out / "scan" / "capture.json").is_file()
     assert len(list((out / "scan" / "frames").glob("*.png"))) == 52

@@ -18,22 +18,24 @@ from virtus.cli import main
 from virtus.devices import default_rig
 from virtus.errors import InputError, VirtusError
 from virtus.pipeline.evaluate import evaluate_scan
-from virtus.pipeline.scan import ScanSettings, load_rig_file, reconstruct_capture, scan
+from virtus.pipeline.scan import load_rig_file, reconstruct_capture, scan
 from virtus.pipeline.scenes import freeform_scene
 from virtus.pipeline.turntable import turntable_poses, turntable_scan
 from virtus.ply import read_ply
+from virtus.projection import Lookup, ProjectorModel
+from virtus.scanner import Scanner
 from virtus.scene import default_scene
 
 #: Blurred projector pixels (bilinear pattern lookup): with perfectly sharp DMD pixels
 #: ("nearest") the phase keeps a pixel staircase that alone gives ~0.3 mm C2M MAE.
-BLURRED = ScanSettings(lookup="bilinear")
+BLURRED = Scanner(projector=ProjectorModel(pixel=Lookup.bilinear))
 
 
 @pytest.fixture(scope="module")
 def freeform_scan(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """One view of the free-form object with the default rig, 4 spp, blurred projector."""
     out = tmp_path_factory.mktemp("freeform")
-    scan(freeform_scene(out), out, settings=BLURRED)
+    scan(freeform_scene(out), out, scanner=BLURRED)
     return out
 
 
@@ -41,7 +43,7 @@ def freeform_scan(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def sphere_scan(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The sphere scene at 1 spp (cheap: only the files and the geometry matter here)."""
     out = tmp_path_factory.mktemp("sphere")
-    scan(default_scene(), out, settings=ScanSettings(spp=1, lookup="bilinear"))
+    scan(default_scene(), out, scanner=BLURRED.with_(spp=1))
     return out
 
 
@@ -94,16 +96,16 @@ def test_reconstruct_with_a_calibration_file(freeform_scan: Path, tmp_path: Path
                  save_paper_txt(default_rig(), tmp_path / "paper_txt")):  # fmt: skip
         other = reconstruct_capture(freeform_scan, path, tmp_path / "other.ply")
         assert np.nanmax(np.abs(other.points - reference)) < PIPELINE_FORMAT_M
-    (tmp_path / "bad.txt").write_text("{}")
+    (tmp_path / "bad.json").write_text("{}")
     with pytest.raises(InputError, match="calibration"):
-        load_rig_file(tmp_path / "bad.txt")
+        load_rig_file(tmp_path / "bad.json")
 
 
 @pytest.mark.slow
 def test_turntable_merge_in_the_object_frame(tmp_path: Path) -> None:
     scene = freeform_scene(tmp_path)
     mesh_path = scene.objects[0].path
-    result = turntable_scan(mesh_path, tmp_path / "tt", n_views=4, settings=BLURRED)
+    result = turntable_scan(mesh_path, tmp_path / "tt", n_views=4, scanner=BLURRED)
     assert len(result.view_counts) == 4 and min(result.view_counts) > 20_000
     assert result.c2m.mae <= C2M_MAE_M
     # The known turntable poses already put the views in place: ICP corrects almost nothing.
@@ -189,6 +191,6 @@ def test_cli_turntable_with_refinement(tmp_path: Path, capsys) -> None:
 
 
 def test_scan_with_a_missing_calibration_fails_before_rendering(tmp_path: Path) -> None:
-    with pytest.raises(InputError, match="^calibration"):
+    with pytest.raises(FileNotFoundError, match="no such calibration file"):
         scan(default_scene(), tmp_path / "out", calibration=tmp_path / "missing.json")
     assert not (tmp_path / "out").exists()  # no capture left behind

@@ -155,8 +155,13 @@ def _predicted_binary_error(profile: np.ndarray, steps: int, fill: float, sigma:
     shifts = 2 * np.pi * np.arange(1, steps + 1) / steps
     # Frame n shows the profile shifted by n P / N: I_n(u) = sum_k c_k exp(2 pi i k (u/P +
     # n/N)); the estimator sum_n I_n exp(-i 2 pi n / N) keeps k = 1 mod N.
-    frames = np.real(np.sum(coefficients[None, None, :] * np.exp(
-        1j * harmonics[None, None, :] * (phi[None, :, None] + shifts[:, None, None])), axis=2))
+    frames = np.real(
+        np.sum(
+            coefficients[None, None, :]
+            * np.exp(1j * harmonics[None, None, :] * (phi[None, :, None] + shifts[:, None, None])),
+            axis=2,
+        )
+    )
     estimate, _, _ = wrapped_phase(frames)
     return error_rad(estimate, phi)
 

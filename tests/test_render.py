@@ -14,7 +14,6 @@ from virtus.errors import InputError
 from virtus.optics import Intrinsics
 from virtus.patterns import default_sequence
 from virtus.render import render, synthesize, trace
-from virtus.sensor import Sensor
 from virtus.render.tracing import sample_offsets
 from virtus.scene import (
     BoxObject,
@@ -25,6 +24,7 @@ from virtus.scene import (
     SphereObject,
     TexturedPlaneObject,
 )
+from virtus.sensor import Sensor
 from virtus.transforms import Pose
 
 
@@ -297,7 +297,7 @@ def test_jit_synthesis_gives_the_same_frames(sequence, lookup: str, bit_depth: i
 
 def test_sensor_rejects_bad_settings() -> None:
     with pytest.raises(InputError, match="bit_depth"):
-        Sensor(bit_depth=12)
+        Sensor(bit_depth=14)
     with pytest.raises(InputError, match="exposure"):
         Sensor(exposure=-1.0)
 

@@ -93,7 +93,7 @@ def test_mesh_loads_in_world_coordinates(tmp_path) -> None:
     [
         ({"objects": []}, r"^scene\.objects: expected at least one object"),
         ({"ambient": 0.1}, r"^scene\.objects: expected at least one object"),
-        ({"objects": [], "lights": 1}, r"^scene\.lights: expected no such key"),
+        ({"objects": [], "lamps": 1}, r"^scene\.lamps: expected no such key"),
         (
             {"objects": [{"type": "sphere", "radius_m": 0.1, "center_m": [0, 0, 1], "colour": 1}]},
             r"^scene\.objects\.0\.colour: expected no such key",

@@ -290,6 +290,7 @@ class Capture:
         # The manifest is written last: a capture.json means a complete capture.
         written = write_json(manifest, self.to_dict(directory, paths), indent=1)
         object.__setattr__(self, "path", directory)
+        object.__setattr__(self, "frame_files", tuple(paths))
         return written
 
     @classmethod

@@ -19,7 +19,11 @@ ARRAY_NAMES = (
     "mask_hit",
     "mask_shadow",
     "mask_outside",
+    "mask_multibounce",
 )
+#: Arrays that captures written before they existed lack; :meth:`GroundTruth.from_arrays`
+#: gives them their defaults.
+OPTIONAL_ARRAY_NAMES = ("mask_multibounce",)
 
 
 @dataclass(frozen=True, eq=False)
@@ -40,6 +44,10 @@ class GroundTruth:
     mask_shadow : (H, W) bool, hit but the projector's centre is occluded from the point.
     mask_outside : (H, W) bool, hit but outside the projector image
         (``u_p`` not in [-0.5, W_p - 0.5) or ``v_p`` not in [-0.5, H_p - 0.5), or behind it).
+    mask_multibounce : (H, W) bool, the pixel's white-projector radiance from interreflections
+        (light paths with one or more bounces before the camera's surface point) exceeds the
+        direct one: a decoded phase there is dominated by indirect light. All False for a
+        single-bounce render, and the default (captures written before it existed).
     """
 
     depth: np.ndarray
@@ -49,6 +57,17 @@ class GroundTruth:
     mask_hit: np.ndarray
     mask_shadow: np.ndarray
     mask_outside: np.ndarray
+    mask_multibounce: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.mask_multibounce is None:
+            object.__setattr__(self, "mask_multibounce", np.zeros_like(self.mask_hit, dtype=bool))
+        elif np.shape(self.mask_multibounce) != np.shape(self.mask_hit):
+            raise InputError(
+                "mask_multibounce",
+                f"shape {np.shape(self.mask_hit)} (the camera image)",
+                np.shape(self.mask_multibounce),
+            )
 
     @property
     def mask(self) -> np.ndarray:
@@ -75,8 +94,11 @@ class GroundTruth:
 
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray]) -> GroundTruth:
-        """Inverse of :meth:`arrays` (``mask`` is recomputed, not read)."""
-        missing = [name for name in ARRAY_NAMES if name != "mask" and name not in arrays]
+        """Inverse of :meth:`arrays` (``mask`` is recomputed, not read; the arrays of
+        :data:`OPTIONAL_ARRAY_NAMES` may be absent and then get their defaults)."""
+        required = [name for name in ARRAY_NAMES if name not in ("mask", *OPTIONAL_ARRAY_NAMES)]
+        missing = [name for name in required if name not in arrays]
         if missing:
             raise InputError("ground truth", f"arrays {ARRAY_NAMES}", f"missing {missing}")
-        return cls(**{name: arrays[name] for name in ARRAY_NAMES if name != "mask"})
+        present = [name for name in ARRAY_NAMES if name != "mask" and name in arrays]
+        return cls(**{name: arrays[name] for name in present})

@@ -18,6 +18,7 @@ from virtus.capture import Capture, rendered_provenance
 from virtus.checks import positive_int
 from virtus.devices import Rig, default_rig
 from virtus.errors import InputError
+from virtus.optics import ThinLens
 from virtus.patterns import PatternSequence, default_sequence
 from virtus.projection import Lookup, ProjectorModel
 from virtus.sensor import Sensor, as_seed
@@ -43,6 +44,12 @@ class Scanner:
     sensor : camera model (:class:`virtus.sensor.Sensor`: bit depth, exposure, EMVA 1288).
     spp : supersamples per camera pixel, a perfect square.
     variant : Mitsuba variant (default: ``$VIRTUS_MITSUBA_VARIANT`` or automatic).
+    bounces : path vertices per camera sample that see the projector (1 = direct light;
+        more = interreflections, one tap per bounce).
+    projector_lens, camera_lens : thin lenses (:class:`virtus.optics.ThinLens`) for
+        projector defocus and camera depth of field; None = pinhole (in focus everywhere).
+    aperture_samples : projector aperture samples per path vertex (default: the renderer's
+        with a projector lens).
     """
 
     rig: Rig = field(default_factory=default_rig)
@@ -51,6 +58,10 @@ class Scanner:
     sensor: Sensor = field(default_factory=Sensor)
     spp: int = 4
     variant: str | None = None
+    bounces: int = 1
+    projector_lens: ThinLens | None = None
+    camera_lens: ThinLens | None = None
+    aperture_samples: int | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.rig, Rig):
@@ -85,6 +96,10 @@ class Scanner:
                 f"{camera.width} x {camera.height} x {spp}",
             )
         object.__setattr__(self, "spp", spp)
+        for name in ("projector_lens", "camera_lens"):
+            lens = getattr(self, name)
+            if lens is not None and not isinstance(lens, ThinLens):
+                raise InputError(name, "a virtus.optics.ThinLens or None", type(lens).__name__)
 
     @property
     def lookup(self) -> Lookup:
@@ -104,6 +119,12 @@ class Scanner:
             "sensor": self.sensor.to_dict(),
             "spp": self.spp,
             "variant": self.variant,
+            "bounces": self.bounces,
+            "projector_lens": None
+            if self.projector_lens is None
+            else self.projector_lens.to_dict(),
+            "camera_lens": None if self.camera_lens is None else self.camera_lens.to_dict(),
+            "aperture_samples": self.aperture_samples,
         }
 
     def capture(
@@ -147,6 +168,10 @@ class Scanner:
             sensor=self.sensor,
             threads=threads,
             block_pixels=block_pixels,
+            bounces=self.bounces,
+            projector_lens=self.projector_lens,
+            camera_lens=self.camera_lens,
+            aperture_samples=self.aperture_samples,
         )
         return Capture(
             sequence=self.sequence,  # type: ignore[arg-type]

@@ -11,6 +11,11 @@ it into a Mitsuba scene. Conventions:
 * Radiometric units are relative: the projector's full-on white gives a Lambertian surface of
   albedo 1, facing it at 1 m on its axis, a radiance of 1. ``Scene.ambient`` is the level of a
   uniform ambient light in the same units (ambient radiance = ambient x diffuse albedo).
+* ``Scene.lights`` are light sources with shadows and interreflections, in the same units:
+  rectangular area lights (a Lambertian emitter of radiance L on its front, local +z, side:
+  a facing surface close to a large panel gets irradiance pi L) and an environment of
+  constant radiance L from every direction (an unoccluded Lambertian surface of albedo rho
+  then has radiance rho L, the same as ``ambient = L``).
 
 Bounds (each refusal is an :class:`~virtus.errors.InputError` naming the key or file):
 every number finite; lengths (radii, sizes, centres, translations, mesh vertices in the
@@ -22,6 +27,13 @@ vertices, valid face indices, no degenerate (zero-area) faces; textures at most
 YAML example (unknown keys are rejected with an error naming the key)::
 
     ambient: 0.02
+    lights:
+      - type: area
+        size_m: [0.5, 0.5]
+        radiance: 2.0
+        pose: {euler_deg: [-90, 0, 0], t: [0, -0.6, 1.0]}   # above, facing down (+y)
+      - type: environment
+        radiance: 0.05
     objects:
       - type: sphere
         radius_m: 0.1
@@ -100,6 +112,8 @@ __all__ = [
     "SceneObject",
     "SphereObject",
     "TexturedPlaneObject",
+    "AreaLight",
+    "EnvironmentLight",
     "default_scene",
     "load_scene",
     "load_texture",
@@ -591,10 +605,42 @@ class TexturedPlaneObject(_Rectangle):
         return image * float(self.material.albedo)  # type: ignore[arg-type]
 
 
+# --------------------------------------------------------------------------------------------
+# lights
+# --------------------------------------------------------------------------------------------
+
+
+class AreaLight(_Rectangle):
+    """A rectangle ``size_m = (width, height)`` in its local z = 0 plane that emits a uniform
+    radiance from its front (local +z) side. It is a black object too: it hides what is
+    behind it and casts shadows."""
+
+    _positional: ClassVar[tuple[str, ...]] = ("size_m", "pose", "radiance")
+    type: Literal["area"] = "area"
+    size_m: tuple[float, float]
+    """(width along local x, height along local y) in metres."""
+    radiance: float = Field(gt=0.0, le=MAX_AMBIENT)
+    """Emitted radiance, relative to the projector's white (see the module docstring)."""
+
+
+class EnvironmentLight(_Model):
+    """Light of constant radiance arriving from every direction (an overcast sky, a lit room)
+    that the scene's objects occlude."""
+
+    _positional: ClassVar[tuple[str, ...]] = ("radiance",)
+    type: Literal["environment"] = "environment"
+    radiance: float = Field(gt=0.0, le=MAX_AMBIENT)
+    """Radiance from every direction, relative to the projector's white."""
+
+
+SceneLight = Annotated[AreaLight | EnvironmentLight, Field(discriminator="type")]
+
+
 #: Location parts pydantic adds for unions and nested models (not keys of the YAML).
 _LOC_NOISE = {
     "sphere", "plane", "box", "mesh", "textured_plane", "SphereObject", "PlaneObject",
-    "BoxObject", "MeshObject", "TexturedPlaneObject", "Material",
+    "BoxObject", "MeshObject", "TexturedPlaneObject", "Material", "area", "environment",
+    "AreaLight", "EnvironmentLight",
 }  # fmt: skip
 
 SceneObject = Annotated[
@@ -619,11 +665,16 @@ class Scene(_Model):
     ambient: float = Field(0.0, ge=0.0, le=MAX_AMBIENT)
     """Uniform ambient light level, relative to the projector's white (see module docs), in
     [0, :data:`MAX_AMBIENT`]."""
+    lights: tuple[SceneLight, ...] = ()
+    """Area lights and at most one environment (shadows and interreflections included)."""
 
     @model_validator(mode="after")
     def _not_empty(self) -> Scene:
         if not self.objects and self.background is None:
             raise InputError("objects", "at least one object or a background", "an empty scene")
+        environments = sum(isinstance(light, EnvironmentLight) for light in self.lights)
+        if environments > 1:
+            raise InputError("lights", "at most one environment light", environments)
         return self
 
     def all_objects(self) -> list[Any]:

@@ -11,14 +11,16 @@ Modules (one concept each):
 * :mod:`~virtus.calib.truth` -- calibrated minus true parameters.
 * :mod:`~virtus.calib.io` -- calibration.json, OpenCV YAML, the paper code's text files.
 * :mod:`~virtus.calib.synthetic` -- exact renderer-free board images and projector maps.
-* :mod:`~virtus.calib.episode` -- capture + calibrate (``virtus calibrate``).
+
+The job that renders the poses and calibrates (``virtus calibrate``) is
+:mod:`virtus.pipeline.calibrate`: this package never imports the renderer, the scanner or
+the pipeline.
 
 Units are SI (metres); board frame: origin at the plane centre, x along the texture
 columns, y along its rows, z into the board; ``board2cam`` maps it into the camera frame.
 """
 
 from virtus.calib.board import CircleBoard, board_from_spec
-from virtus.calib.episode import CalibrationResult, calibrate_rig, recalibrate
 from virtus.calib.io import load_opencv_yaml, load_paper_txt, save_opencv_yaml, save_paper_txt
 from virtus.calib.poses import BoardPose, paper_poses, pose_set, random_poses
 from virtus.calib.solve import PoseObservation, calibrate_observations
@@ -26,18 +28,15 @@ from virtus.calib.truth import truth_error
 
 __all__ = [
     "BoardPose",
-    "CalibrationResult",
     "CircleBoard",
     "PoseObservation",
     "board_from_spec",
     "calibrate_observations",
-    "calibrate_rig",
     "load_opencv_yaml",
     "load_paper_txt",
     "paper_poses",
     "pose_set",
     "random_poses",
-    "recalibrate",
     "save_opencv_yaml",
     "save_paper_txt",
     "truth_error",

@@ -27,6 +27,7 @@ app = typer.Typer(
 def _register_commands() -> None:
     # One module per sub-command (import order = order in --help).
     from virtus.cli import (
+        ablation_cmd,
         calibrate_cmd,
         capture_cmd,
         decode_cmd,
@@ -50,6 +51,7 @@ def _register_commands() -> None:
         reconstruct_cmd,
         scan_cmd,
         evaluate_cmd,
+        ablation_cmd,
     ):
         module.register(app)
 

@@ -1,4 +1,5 @@
-"""``virtus calibrate``: capture a circle board in many poses, calibrate, compare with the truth."""
+"""``virtus calibrate``: capture a circle board in many poses, calibrate, compare with the truth
+(the job is :func:`virtus.pipeline.calibrate.calibrate_rig`)."""
 
 from __future__ import annotations
 
@@ -7,7 +8,18 @@ from typing import Annotated, Any
 
 import typer
 
-from virtus.cli.options import LOOKUP_HELP, Lookup
+from virtus.cli.options import (
+    BitDepthOption,
+    LookupOption,
+    ProjectorOption,
+    RigOption,
+    SeedOption,
+    SensorOption,
+    SequenceOption,
+    SppOption,
+    VariantOption,
+    build_scanner,
+)
 
 DEFAULT_OUT = Path("virtus-calibration")
 
@@ -16,28 +28,52 @@ def register(app: typer.Typer) -> None:
     @app.command("calibrate")
     def calibrate(
         out: Annotated[Path, typer.Option(help="Output directory.")] = DEFAULT_OUT,
-        rig: Annotated[
-            Path | None, typer.Option(help="True rig JSON to render with; default: the paper's.")
-        ] = None,
+        rig: RigOption = None,
+        sequence: SequenceOption = None,
         board: Annotated[str, typer.Option(help="Circle board ROWSxCOLS (4x7, 5x9, 7x13).")] = (
             "7x13"
         ),
-        poses: Annotated[str, typer.Option(help="'paper' (18 poses) or 'random:N'.")] = "paper",
-        spp: Annotated[int, typer.Option(help="Supersamples per pixel (perfect square).")] = 4,
-        lookup: Annotated[Lookup, typer.Option(help=LOOKUP_HELP)] = Lookup.nearest,
-        seed: Annotated[int, typer.Option(help="Seed of the random poses.")] = 0,
+        poses: Annotated[
+            str, typer.Option(help="'paper' (18 poses) or 'random:N' (3 <= N <= 200).")
+        ] = "paper",
+        spp: SppOption = 4,
+        lookup: LookupOption = None,
+        projector: ProjectorOption = "ideal",
+        bit_depth: BitDepthOption = None,
+        sensor: SensorOption = "ideal",
+        seed: SeedOption = 0,
+        variant: VariantOption = None,
+        overwrite: Annotated[
+            bool, typer.Option("--overwrite", help="Remove an earlier run's files in OUT first.")
+        ] = False,
+        resume: Annotated[
+            bool,
+            typer.Option(
+                "--resume",
+                help="Continue an interrupted run in OUT (same settings) from its finished poses.",
+            ),
+        ] = False,
     ) -> None:
-        """Render the board in every pose (52 frames each), calibrate camera, projector and
-        their pose, and write OUT/calibration.json (+ OpenCV YAML and the paper's txt files)."""
+        """Render the board in every pose (the whole pattern sequence each), calibrate camera,
+        projector and their pose, and write OUT/calibration.json (+ OpenCV YAML and the
+        paper's txt files). Identical runs write identical files; OUT/run.json records the
+        run, OUT/timing.json its timings."""
         import warnings
 
         from rich.console import Console
         from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-        from virtus.calib.episode import calibrate_rig
-        from virtus.devices import Rig, default_rig
+        from virtus.pipeline.calibrate import CALIBRATION_FILE, calibrate_rig, check_pose_spec
+        from virtus.sensor import as_seed
 
-        true_rig = Rig.load_json(rig) if rig is not None else default_rig()
+        # Cheap checks first: nothing is read, rendered or written before they pass.
+        poses = check_pose_spec(poses)
+        seed = as_seed(seed)
+        scanner = build_scanner(
+            rig=rig, sequence=sequence, lookup=lookup, projector=projector, spp=spp,
+            bit_depth=bit_depth,
+            sensor=sensor, variant=variant,
+        )  # fmt: skip
         console = Console()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -55,19 +91,19 @@ def register(app: typer.Typer) -> None:
                     bar.update(task, completed=done, total=total, description=name)
 
                 result = calibrate_rig(
-                    true_rig,
+                    scanner,
                     board=board,
                     poses=poses,
-                    spp=spp,
-                    lookup=lookup.value,
                     rng=seed,
                     progress=progress,
                     out_dir=out,
+                    resume=resume,
+                    overwrite=overwrite,
                 )
         for warning in caught:
             console.print(f"[yellow]warning:[/yellow] {warning.message}")
         _print_summary(console, result.to_dict())
-        console.print(f"wrote {out / 'calibration.json'}")
+        console.print(f"wrote {out / CALIBRATION_FILE}")
 
 
 def _print_summary(console: Any, data: dict[str, Any]) -> None:

@@ -10,7 +10,10 @@ import typer
 
 from virtus.cli.options import (
     BitDepthOption,
+    BouncesOption,
+    CameraLensOption,
     LookupOption,
+    ProjectorLensOption,
     ProjectorOption,
     RigOption,
     SeedOption,
@@ -39,6 +42,9 @@ def register(app: typer.Typer) -> None:
         sensor: SensorOption = "ideal",
         seed: SeedOption = 0,
         variant: VariantOption = None,
+        bounces: BouncesOption = 1,
+        projector_lens: ProjectorLensOption = None,
+        camera_lens: CameraLensOption = None,
         overwrite: Annotated[
             bool, typer.Option("--overwrite", help="Replace an existing capture in OUT.")
         ] = False,
@@ -52,7 +58,8 @@ def register(app: typer.Typer) -> None:
         scanner = build_scanner(
             rig=rig, sequence=sequence, lookup=lookup, projector=projector, spp=spp,
             bit_depth=bit_depth,
-            sensor=sensor, variant=variant,
+            sensor=sensor, variant=variant, bounces=bounces,
+            projector_lens=projector_lens, camera_lens=camera_lens,
         )  # fmt: skip
         the_scene = load_scene(scene) if scene is not None else default_scene()
         start = time.perf_counter()

@@ -8,7 +8,10 @@ from typing import Annotated, Any
 import typer
 
 from virtus.cli.options import (
+    BouncesOption,
+    CameraLensOption,
     LookupOption,
+    ProjectorLensOption,
     ProjectorOption,
     RigOption,
     SensorOption,
@@ -30,10 +33,14 @@ def register(app: typer.Typer) -> None:
         spp: SppOption = 4,
         sensor: SensorOption = "ideal",
         variant: VariantOption = None,
+        bounces: BouncesOption = 1,
+        projector_lens: ProjectorLensOption = None,
+        camera_lens: CameraLensOption = None,
     ) -> None:
         """Calibrate the paper's rig with its 18 board poses, capture the 100 mm sphere,
         reconstruct it with the calibrated parameters, fit a sphere, and compare with the
-        paper. Writes OUT/metrics.json, OUT/calibration.json, OUT/scan/ (capture + points.ply)."""
+        paper. Writes OUT/metrics.json, OUT/calibration/ (calibration.json, YAML, paper
+        txt), OUT/scan/ (capture + points.ply)."""
         from rich.console import Console
         from rich.progress import (
             BarColumn,
@@ -46,7 +53,8 @@ def register(app: typer.Typer) -> None:
 
         scanner = build_scanner(
             rig=rig, sequence=sequence, lookup=lookup, projector=projector, spp=spp, sensor=sensor,
-            variant=variant,
+            variant=variant, bounces=bounces, projector_lens=projector_lens,
+            camera_lens=camera_lens,
         )  # fmt: skip
         console = Console()
         with Progress(
@@ -67,7 +75,7 @@ def register(app: typer.Typer) -> None:
 
             result = run_demo(out, progress=progress, scanner=scanner)
         _print_table(console, result.metrics)
-        console.print(f"wrote {out / 'metrics.json'}, {out / 'calibration.json'}, "
+        console.print(f"wrote {out / 'metrics.json'}, {out / 'calibration' / 'calibration.json'}, "
                       f"{out / 'scan' / 'points.ply'}")  # fmt: skip
 
 

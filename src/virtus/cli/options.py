@@ -67,6 +67,18 @@ SensorOption = Annotated[
         "EMVA 1288 parameters."
     ),
 ]
+BouncesOption = Annotated[
+    int,
+    typer.Option(help="Light bounces that see the projector (1 = direct; 2+ = interreflections)."),
+]
+ProjectorLensOption = Annotated[
+    str | None,
+    typer.Option(help="Projector thin lens 'APERTURE_M,FOCUS_M' (defocus); default: pinhole."),
+]
+CameraLensOption = Annotated[
+    str | None,
+    typer.Option(help="Camera thin lens 'APERTURE_M,FOCUS_M' (depth of field); default: pinhole."),
+]
 VariantOption = Annotated[
     str | None, typer.Option(help="Mitsuba variant (default: CUDA if it works, else LLVM).")
 ]
@@ -92,6 +104,21 @@ def load_sequence_option(path: Path | None, width: int, height: int):  # noqa: A
     return sequence
 
 
+def parse_lens(text: str | None, option: str):  # noqa: ANN201
+    """A :class:`virtus.optics.ThinLens` from ``'APERTURE_M,FOCUS_M'``, or None."""
+    from virtus.errors import InputError
+    from virtus.optics import ThinLens
+
+    if text is None:
+        return None
+    parts = text.split(",")
+    try:
+        aperture, focus = (float(part) for part in parts)
+    except ValueError:
+        raise InputError(option, "'APERTURE_M,FOCUS_M' (two numbers, metres)", text) from None
+    return ThinLens(aperture, focus)
+
+
 def build_scanner(
     *,
     rig: Path | None = None,
@@ -102,6 +129,9 @@ def build_scanner(
     sensor: str = "ideal",
     bit_depth: int | None = None,
     variant: str | None = None,
+    bounces: int = 1,
+    projector_lens: str | None = None,
+    camera_lens: str | None = None,
 ) -> Scanner:
     """The Scanner the command-line options describe (every job builds it here)."""
     from virtus.devices import Rig, default_rig
@@ -124,4 +154,7 @@ def build_scanner(
         sensor=the_sensor,
         spp=spp,
         variant=variant,
+        bounces=bounces,
+        projector_lens=parse_lens(projector_lens, "--projector-lens"),
+        camera_lens=parse_lens(camera_lens, "--camera-lens"),
     )

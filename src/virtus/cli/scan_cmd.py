@@ -9,7 +9,10 @@ import typer
 
 from virtus.cli.options import (
     BitDepthOption,
+    BouncesOption,
+    CameraLensOption,
     LookupOption,
+    ProjectorLensOption,
     ProjectorOption,
     RigOption,
     SeedOption,
@@ -48,6 +51,9 @@ def register(app: typer.Typer) -> None:
         sensor: SensorOption = "ideal",
         seed: SeedOption = 0,
         variant: VariantOption = None,
+        bounces: BouncesOption = 1,
+        projector_lens: ProjectorLensOption = None,
+        camera_lens: CameraLensOption = None,
         turntable: Annotated[
             int,
             typer.Option(
@@ -76,7 +82,8 @@ def register(app: typer.Typer) -> None:
         scanner = build_scanner(
             rig=rig, sequence=sequence, lookup=lookup, projector=projector, spp=spp,
             bit_depth=bit_depth,
-            sensor=sensor, variant=variant,
+            sensor=sensor, variant=variant, bounces=bounces,
+            projector_lens=projector_lens, camera_lens=camera_lens,
         )  # fmt: skip
         # Read the calibration before anything is rendered or written.
         used = (

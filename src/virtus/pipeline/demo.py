@@ -3,7 +3,7 @@
 :func:`run_demo` does, on built-in defaults:
 
 1. virtual calibration of the paper's rig with its 18 board poses
-   (:func:`virtus.calib.episode.calibrate_rig`) -> ``DIR/calibration.json``;
+   (:func:`virtus.pipeline.calibrate.calibrate_rig`) -> ``DIR/calibration/``;
 2. capture of the 100 mm-radius sphere scene with the true rig -> ``DIR/scan/`` (the layout
    of ``virtus capture``, plus ``decoded/``);
 3. reconstruction with the *calibrated* parameters -> ``DIR/scan/points.ply`` (metres,
@@ -131,7 +131,8 @@ def run_demo(
 
     Returns
     -------
-    :class:`DemoResult`; ``DIR/metrics.json``, ``DIR/calibration.json``, ``DIR/scan/`` written.
+    :class:`DemoResult`; ``DIR/metrics.json``, ``DIR/calibration/calibration.json`` and
+    ``DIR/scan/`` written.
     """
     from virtus.pipeline.calibrate import calibrate_rig
     from virtus.scene import SphereObject, default_scene
@@ -153,7 +154,8 @@ def run_demo(
         poses=config.poses,
         rng=config.seed,
         progress=lambda done, total, name: say("calibration", done, total),
-        out_dir=root,
+        out_dir=root / "calibration",
+        overwrite=True,
     )
     timing["calibration_s"] = time.perf_counter() - start
 
@@ -227,7 +229,7 @@ def run_demo(
             "center_mm": (fit.center * 1e3).tolist(),
             "center_true_mm": [c * 1e3 for c in sphere.center_m],
             "radial_error_histogram_mm": fit.hist.to_dict(1e3),
-            "reconstructed_with": "calibrated rig (calibration.json)",
+            "reconstructed_with": "calibrated rig (calibration/calibration.json)",
         },
         "sphere_true_rig": {
             "radius_mm": true_fit.radius * 1e3,
@@ -243,7 +245,7 @@ def run_demo(
         "scanner": scanner.to_dict(),
         "provenance": _provenance(),
         "files": {
-            "calibration": "calibration.json",
+            "calibration": "calibration/calibration.json",
             "capture": "scan/capture.json",
             "points": "scan/points.ply",
             "radial_error_map": "scan/sphere_radial_error.npy",

@@ -2,7 +2,9 @@
 
 Shapes are placed in the world frame given by their ``object2world`` poses; every BSDF is
 wrapped in ``twosided`` so that planes and open meshes reflect on both sides. Materials map
-to Mitsuba BSDFs as documented in :class:`virtus.scene.Material`.
+to Mitsuba BSDFs as documented in :class:`virtus.scene.Material`. Scene lights become
+Mitsuba emitters: an area light a black ``rectangle`` with an ``area`` emitter (radiance on
+its local +z side), the environment a ``constant`` emitter.
 """
 
 from __future__ import annotations
@@ -14,7 +16,9 @@ import numpy as np
 
 from virtus.errors import InputError
 from virtus.scene import (
+    AreaLight,
     BoxObject,
+    EnvironmentLight,
     Material,
     MeshObject,
     PlaneObject,
@@ -128,13 +132,30 @@ def shape_dict(mi: ModuleType, dr: ModuleType, obj: Any, name: str) -> Any:
     raise InputError(name, "a scene object", type(obj).__name__)
 
 
+def light_dict(mi: ModuleType, light: AreaLight | EnvironmentLight) -> dict[str, Any]:
+    """Mitsuba description of one scene light (an emitting shape, or an emitter)."""
+    radiance = {"type": "rgb", "value": [float(light.radiance)] * 3}
+    if isinstance(light, EnvironmentLight):
+        return {"type": "constant", "radiance": radiance}
+    width, height = light.size_m
+    return {
+        "type": "rectangle",
+        "to_world": _transform(mi, light.pose, (width / 2, height / 2, 1.0)),
+        "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0] * 3}},
+        "emitter": {"type": "area", "radiance": radiance},
+    }
+
+
 def scene_dict(mi: ModuleType, dr: ModuleType, scene: Scene) -> dict[str, Any]:
-    """Mitsuba ``load_dict`` description of the scene's shapes (no emitter, no sensor)."""
+    """Mitsuba ``load_dict`` description of the scene's shapes and lights (no projector, no
+    sensor)."""
     result: dict[str, Any] = {"type": "scene"}
     for index, (obj, name) in enumerate(
         zip(scene.all_objects(), scene.object_names(), strict=True)
     ):
         result[f"shape_{index:03d}"] = shape_dict(mi, dr, obj, name)
+    for index, light in enumerate(scene.lights):
+        result[f"light_{index:03d}"] = light_dict(mi, light)
     return result
 
 

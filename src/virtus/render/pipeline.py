@@ -10,11 +10,13 @@ import numpy as np
 from virtus.devices import Rig
 from virtus.errors import InputError
 from virtus.groundtruth import GroundTruth
+from virtus.optics import ThinLens
+from virtus.projection import ProjectorModel, as_lookup
 from virtus.render.synthesis import synthesize
 from virtus.render.synthesis_jit import synthesize_digital
 from virtus.render.tracing import trace
 from virtus.scene import Scene
-from virtus.sensor import Sensor, as_lookup, as_seed
+from virtus.sensor import Sensor, as_seed
 from virtus.transforms import Pose
 
 #: Where frames are synthesised (see :func:`render`).
@@ -33,8 +35,12 @@ class Rendering:
     sensor : the camera sensor model.
     seed : seed of the sensor's counter-based noise streams.
     spp : supersamples per pixel.
-    lookup : projector pixel model, ``"nearest"`` or ``"bilinear"``.
+    lookup : projector pixel model, ``"nearest"``, ``"bilinear"`` or ``"psf"``.
+    projector : the full projector model.
     variant : Mitsuba variant that traced it.
+    bounces : path vertices per camera sample (1 = direct light only).
+    aperture_samples : projector aperture samples per path vertex (1 = pinhole projector).
+    projector_lens, camera_lens : thin lenses (defocus, depth of field), or None (pinholes).
     """
 
     frames: np.ndarray
@@ -45,6 +51,11 @@ class Rendering:
     spp: int
     lookup: str
     variant: str
+    projector: ProjectorModel | None = None
+    bounces: int = 1
+    aperture_samples: int = 1
+    projector_lens: ThinLens | None = None
+    camera_lens: ThinLens | None = None
 
     @property
     def bit_depth(self) -> int:
@@ -57,7 +68,14 @@ class Rendering:
             "exposure_dn_per_radiance": self.exposure,
             "spp": self.spp,
             "lookup": self.lookup,
+            "projector": None if self.projector is None else self.projector.to_dict(),
             "mitsuba_variant": self.variant,
+            "bounces": self.bounces,
+            "aperture_samples": self.aperture_samples,
+            "projector_lens": None
+            if self.projector_lens is None
+            else self.projector_lens.to_dict(),
+            "camera_lens": None if self.camera_lens is None else self.camera_lens.to_dict(),
         }
 
 
@@ -67,7 +85,8 @@ def render(
     sequence: Any,
     *,
     spp: int = 4,
-    lookup: str = "nearest",
+    lookup: str | None = None,
+    projector: ProjectorModel | None = None,
     exposure: float | Literal["auto"] = "auto",
     bit_depth: int = 8,
     variant: str | None = None,
@@ -77,6 +96,10 @@ def render(
     synthesis: Literal["auto", "sparse", "jit"] = "auto",
     threads: int | None = None,
     block_pixels: int | None = None,
+    bounces: int = 1,
+    projector_lens: ThinLens | None = None,
+    camera_lens: ThinLens | None = None,
+    aperture_samples: int | None = None,
 ) -> Rendering:
     """Render every frame of ``sequence`` for one pose from a single ray-tracing pass.
 
@@ -86,7 +109,10 @@ def render(
     scene : the scene (virtus.scene); world frame = camera frame unless ``cam2world``.
     sequence : pattern sequence (virtus.patterns) with ``frames`` and ``profile(i)``.
     spp : supersamples per pixel, a perfect square (stratified grid centred on the pixel).
-    lookup : projector pixel model, ``"nearest"`` (DMD pixels) or ``"bilinear"``.
+    lookup : projector pixel model of an otherwise ideal projector: ``"nearest"`` (DMD pixels,
+        the default) or ``"bilinear"``; shorthand for ``projector=ProjectorModel(pixel=...)``.
+    projector : the projector model (:class:`virtus.projection.ProjectorModel`: response,
+        black level, pixel PSF, fall-off); give it or ``lookup``, not both.
     exposure : ``"auto"`` (white frame's 99th percentile at 90 % of full scale) or digital
         numbers per unit radiance (see :mod:`virtus.sensor`).
     bit_depth : 8, 10, 12 or 16.
@@ -99,27 +125,48 @@ def render(
         GPUs), ``"auto"`` (``"jit"`` for CUDA variants, else ``"sparse"``). Same frames.
     threads, block_pixels : host synthesis threads and block size (the frames do not depend
         on them; defaults: every CPU, 16384 pixels).
+    bounces, projector_lens, camera_lens, aperture_samples : light transport and lenses, as
+        :func:`virtus.render.tracing.trace` (interreflections, projector defocus, camera depth
+        of field); the defaults are direct light through pinholes.
 
     Returns
     -------
     :class:`Rendering` with frames (F, H, W) and ground truth.
     """
     sensor = sensor or Sensor(bit_depth=bit_depth, exposure=exposure)
-    lookup = as_lookup(lookup).value
+    if projector is None:
+        projector = ProjectorModel(pixel=as_lookup(lookup or "nearest"))
+    elif lookup is not None and as_lookup(lookup) != projector.pixel:
+        raise InputError("lookup", f"the projector's pixel model {projector.pixel.value!r}", lookup)
+    lookup = projector.pixel.value
+    intrinsics = rig.projector.intrinsics
     if synthesis not in SYNTHESIS:
         raise InputError("synthesis", f"one of {SYNTHESIS}", synthesis)
     seed = as_seed(rng)
-    traced = trace(rig, scene, spp=spp, cam2world=cam2world, variant=variant)
+    traced = trace(
+        rig,
+        scene,
+        spp=spp,
+        cam2world=cam2world,
+        variant=variant,
+        bounces=bounces,
+        projector_lens=projector_lens,
+        camera_lens=camera_lens,
+        aperture_samples=aperture_samples,
+    )
     exposure_value = sensor.exposure_for(traced.white)
     if synthesis == "jit" or (synthesis == "auto" and traced.variant.startswith("cuda")):
-        frames = synthesize_digital(traced, sequence, lookup, sensor, exposure_value, seed)
+        frames = synthesize_digital(
+            traced, sequence, projector, sensor, exposure_value, seed, intrinsics
+        )
     else:
         # The sensor is pointwise, so it runs on each synthesised block (no float stack).
         options = {} if block_pixels is None else {"block_pixels": block_pixels}
         frames = synthesize(
             traced,
             sequence,
-            lookup,
+            projector,
+            projector_intrinsics=intrinsics,
             transform=lambda block, frames, pixels: sensor.digitize(
                 block, exposure_value, seed=seed, frames=frames, pixels=pixels
             ),
@@ -136,4 +183,9 @@ def render(
         spp=traced.spp,
         lookup=lookup,
         variant=traced.variant,
+        projector=projector,
+        bounces=traced.bounces,
+        aperture_samples=traced.aperture_samples,
+        projector_lens=projector_lens,
+        camera_lens=camera_lens,
     )

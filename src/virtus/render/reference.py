@@ -2,9 +2,10 @@
 
 An independent check of :func:`virtus.render.render` (and the baseline of the speed
 benchmark): Mitsuba's ``perspective`` sensor and ``projector`` emitter with its ``direct``
-integrator render each frame separately. Mitsuba's frusta are symmetric and ideal, so the
-rig must have centred principal points (``c = (size - 1) / 2``), square pixels and no
-distortion; the scene must have no ambient light.
+integrator (one bounce) or its ``path`` tracer (``bounces`` > 1: interreflections, path depth
+``bounces + 1``, no Russian roulette) render each frame separately. Mitsuba's frusta are
+symmetric and ideal, so the rig must have centred principal points (``c = (size - 1) / 2``),
+square pixels and no distortion; the scene must have no ambient light.
 
 Frames: Mitsuba's camera/emitter local frame looks down +z with +x left and +y up, so an
 OpenCV-frame pose maps to it through ``diag(-1, -1, 1)``; the projector texture's uv of
@@ -85,6 +86,7 @@ class ReferenceRenderer:
         cam2world: Pose | None = None,
         jitter: bool = True,
         bsdf_samples: int = 0,
+        bounces: int = 1,
         variant: str | None = None,
     ) -> None:
         if lookup not in LOOKUPS:
@@ -130,11 +132,16 @@ class ReferenceRenderer:
                 "wrap_mode": "clamp",
             },
         }
-        description["integrator"] = {
-            "type": "direct",
-            "emitter_samples": 1,
-            "bsdf_samples": int(bsdf_samples),
-        }
+        bounces = positive_int("bounces", bounces)
+        if bounces == 1:
+            description["integrator"] = {
+                "type": "direct",
+                "emitter_samples": 1,
+                "bsdf_samples": int(bsdf_samples),
+            }
+        else:
+            depth = bounces + 1
+            description["integrator"] = {"type": "path", "max_depth": depth, "rr_depth": depth + 1}
         self._scene = mi.load_dict(description)
         self._params = mi.traverse(self._scene)
         self._key = next(k for k in self._params.keys() if k.endswith("irradiance.data"))

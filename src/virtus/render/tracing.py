@@ -1,15 +1,27 @@
-"""One ray-tracing pass per pose: camera rays -> surface -> projector coordinates and weights.
+"""One ray-tracing pass per pose: camera rays -> light paths -> projector coordinates and weights.
 
-For every camera pixel this records, per supersample, the projector coordinates
-``(u_p, v_p)`` of the surface point and the radiance that a full-on (white) projector sends
-back to the camera through that sample. Light transport is linear in the pattern, so every
-frame of a sequence is synthesised from this one pass (:mod:`virtus.render.synthesis`).
+For every camera pixel this records *taps*: per camera supersample, path vertex and projector
+aperture sample, the projector coordinates ``(u_p, v_p)`` that light the vertex and the
+radiance that a full-on (white) projector sends back to the camera along that path. Light
+transport is linear in the pattern, so every frame of a sequence is synthesised from this one
+pass (:mod:`virtus.render.synthesis`): ``L_f(p) = sum_t weight[p, t] pattern_f(u_p or v_p
+[p, t]) + ambient[p]``.
 
 Model
 -----
 * Camera rays come from ``rig.camera.intrinsics.unproject`` (any principal point, lens
   distortion) at ``spp = s * s`` stratified positions per pixel: an s x s grid at offsets
   ``(i + 0.5) / s - 0.5`` px, whose centroid is the pixel centre (2 x 2: +-0.25 px).
+* Camera depth of field (``camera_lens``, a :class:`~virtus.optics.ThinLens`): the pinhole
+  ray of a supersample meets the focus plane z = d_f (camera frame) at F; the ray starts
+  instead at a point a of the aperture disk (diameter A, in the plane z = 0) and goes
+  toward F. The pixel's spp aperture points are stratified (one per equal-area annulus, at
+  golden-angle steps from a random angle per pixel) and paired with the sub-pixel positions
+  through a random shift per pixel, so the two are uncorrelated. Radiometry: the mean over
+  the aperture (no cos^4 vignetting). A point at depth d is spread over a disk of diameter
+  ``A fx |d - d_f| / (d d_f)`` px: :meth:`ThinLens.blur_diameter_px` with ``fx`` read as
+  the image distance in pixels (``focal_length_m`` None, or ``focal_px = fx (d_f - f) /
+  d_f``).
 * Surface points go to the projector frame through ``rig.cam2proj`` and to projector pixels
   through ``rig.projector.intrinsics.project`` (its principal point and distortion).
 * The projector is a point source at its optical centre whose irradiance on its virtual
@@ -17,14 +29,37 @@ Model
   power; this is also Mitsuba's ``projector`` emitter): radiant intensity
   ``I = pi / cos^3(theta_p)`` for a white pixel, theta_p the angle to the projector axis.
   Lens distortion's change of pixel solid angle is neglected.
-* Radiance toward the camera: ``L = f(wi, wo) cos(theta_o) I / d^2`` with the hit's Mitsuba
-  BSDF ``f`` (``bsdf.eval`` includes the cosine), ``d`` the distance to the projector centre,
-  zero where a shadow ray to the projector centre is blocked or the point falls outside the
-  projector image. A Lambertian surface of albedo rho facing the projector at 1 m on its
-  axis therefore has ``L = rho``.
+* Radiance toward the camera from a surface point X: ``L = f(wi, wo) cos(theta_o) I / d^2``
+  with the hit's Mitsuba BSDF ``f`` (``bsdf.eval`` includes the cosine), ``d`` the distance
+  to the projector centre, zero where a shadow ray to the projector is blocked or the point
+  falls outside the projector image. A Lambertian surface of albedo rho facing the projector
+  at 1 m on its axis therefore has ``L = rho``.
+* Projector defocus (``projector_lens``): ``aperture_samples`` points a of the projector's
+  aperture disk (stratified as the camera's, a new random angle per vertex) each carry
+  ``1 / aperture_samples`` of the power. Through a, the projector pixel that lights X is the
+  pinhole projection of the point where the line a -> X crosses the projector focus plane
+  z = d_f; the shadow ray and the BSDF direction go from X to a; ``I / d^2`` stays that of
+  the centre (the aperture is small against the distance). A point at projector depth z sees
+  a disk of projector pixels of diameter ``A fx |z - d_f| / (z d_f)``.
+* Interreflections (``bounces`` > 1): from each camera hit the path continues by sampling
+  the BSDF (``bsdf.sample``; the throughput is its weight f cos / pdf), up to ``bounces``
+  vertices, with next-event estimation toward the projector at every vertex (vertex 0 = the
+  camera's surface point gives the direct light, vertex k the light that bounced k times).
+  No Russian roulette: a fixed, small number of vertices. Random numbers are counter-based
+  (TEA hashes of the global camera-sample index and a stream number, see ``_STREAM_*``),
+  so a trace does not depend on how the rays are split into chunks.
+* Taps: each camera supersample has ``T = bounces * aperture_samples`` taps, so a pixel has
+  ``S = spp * T`` (column ``s * T + k * aperture_samples + j`` for supersample s, vertex k,
+  aperture sample j). Camera aperture samples do not add taps: they move the supersamples.
+  With ``bounces=1`` and no lenses the pass is the single-bounce pinhole one, bit for bit.
 * Ambient light: ``L_amb = scene.ambient * rho_d`` with ``rho_d`` Mitsuba's diffuse
-  reflectance of the hit (no occlusion).
-* Ground truth uses one extra ray through each pixel centre.
+  reflectance of the camera hit (no occlusion), plus the scene's ``lights`` (area lights and
+  an environment, see :class:`virtus.scene.Scene`): next-event estimation toward them at every
+  path vertex with the same paths (visibility included), and the emitters the camera rays
+  see directly. It is pattern-independent and goes into ``Trace.ambient``.
+* Ground truth uses one extra pinhole ray through each pixel centre (lenses do not move
+  it); ``mask_multibounce`` marks pixels whose white-projector radiance from vertices >= 1
+  exceeds that of vertex 0.
 """
 
 from __future__ import annotations
@@ -39,7 +74,7 @@ from virtus.checks import positive_int
 from virtus.devices import Rig
 from virtus.errors import InputError
 from virtus.groundtruth import GroundTruth
-from virtus.optics import Intrinsics
+from virtus.optics import Intrinsics, ThinLens
 from virtus.render.backend import mitsuba
 from virtus.render.mitsuba_scene import check_in_front, scene_dict
 from virtus.scene import Scene
@@ -47,6 +82,27 @@ from virtus.transforms import Pose
 
 #: Rays traced per Mitsuba call: bounds memory (~100 B per ray inside Dr.Jit).
 _RAYS_PER_CHUNK = 1 << 23
+#: Most path vertices per camera sample (``bounces``): each adds a tap per sample; light
+#: that bounced more than 7 times is negligible on diffuse scenes of albedo < 0.9.
+MAX_BOUNCES = 8
+#: Most projector aperture samples per path vertex: each adds a tap per sample.
+MAX_APERTURE_SAMPLES = 1024
+#: Projector aperture samples per vertex when a projector lens is given and the count is not.
+DEFAULT_APERTURE_SAMPLES = 16
+#: Golden angle (radians): successive aperture points turn by it (a Vogel spiral).
+_GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
+#: TEA rounds per random number: 8 decorrelates consecutive indices (Zafar et al. 2010).
+_TEA_ROUNDS = 8
+#: Random streams (second TEA key; the first is the global camera-sample index, or the
+#: pixel index for per-pixel numbers). Camera aperture: shift, angle (per pixel), radius.
+_STREAM_CAMERA = 0
+#: BSDF sampling at vertex k: streams ``_STREAM_BSDF + 3 k + (0, 1, 2)``.
+_STREAM_BSDF = 16
+#: Emitter (lights) sampling at vertex k: ``_STREAM_LIGHTS + 2 k + (0, 1)``.
+_STREAM_LIGHTS = 64
+#: Projector aperture at vertex k: angle ``_STREAM_PROJECTOR + k * 2048``, radius of sample
+#: j ``... + 1 + j``.
+_STREAM_PROJECTOR = 1 << 16
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,15 +113,20 @@ class Trace:
     ----------
     height, width : camera image size in pixels.
     projector_width, projector_height : projector image size in pixels.
-    spp : supersamples per pixel.
-    weight : (P, spp) float32, P = H * W pixels in row-major order: radiance each sample
-        adds to its pixel under a white projector, already divided by ``spp``; 0 where the
-        sample is unlit (no hit, shadowed, outside the projector image).
-    u_p, v_p : (P, spp) float32 projector pixel coordinates of each sample's surface point;
-        0 where ``weight`` is 0.
+    spp : camera supersamples per pixel.
+    weight : (P, S) float32, P = H * W pixels in row-major order, S = spp * bounces *
+        aperture_samples taps (column ``s * T + k * aperture_samples + j`` for supersample s,
+        path vertex k, projector aperture sample j, T = :attr:`taps_per_sample`): radiance each
+        tap adds to its pixel under a white projector, already divided by ``spp`` and
+        ``aperture_samples``; 0 where the tap is unlit (no hit, shadowed, outside the
+        projector image, path ended).
+    u_p, v_p : (P, S) float32 projector pixel coordinates of each tap; 0 where ``weight``
+        is 0.
     ambient : (P,) float32 ambient radiance of each pixel (mean over its samples).
     gt : ground truth through the pixel centres.
     variant : the Mitsuba variant that traced it.
+    bounces : path vertices per camera sample (1 = direct light only).
+    aperture_samples : projector aperture samples per vertex (1 = pinhole projector).
     """
 
     height: int
@@ -79,17 +140,37 @@ class Trace:
     ambient: np.ndarray
     gt: GroundTruth
     variant: str
+    bounces: int = 1
+    aperture_samples: int = 1
+
+    @property
+    def taps_per_sample(self) -> int:
+        """Taps per camera supersample, ``bounces * aperture_samples``."""
+        return self.bounces * self.aperture_samples
 
     @functools.cached_property
     def direct(self) -> np.ndarray:
-        """(P,) float32 radiance from a full-on projector, without ambient light."""
+        """(P,) float32 radiance from a full-on projector (all bounces), without ambient."""
         # A matrix-vector product: numpy's sum over a short last axis is several times slower.
-        return self.weight @ np.ones(self.spp, dtype=np.float32)
+        return self.weight @ np.ones(self.weight.shape[1], dtype=np.float32)
 
     @property
     def white(self) -> np.ndarray:
         """(H, W) float32 radiance under a full-on projector, ambient included."""
         return (self.direct + self.ambient).reshape(self.height, self.width)
+
+    @functools.cached_property
+    def bounce_radiance(self) -> np.ndarray:
+        """(bounces, P) float32 white-projector radiance by path vertex: row 0 is the direct
+        light, row k the light that bounced k times before the camera's surface point."""
+        return _by_vertex(self.weight, self.bounces, self.aperture_samples)
+
+
+def _by_vertex(weight: np.ndarray, bounces: int, aperture_samples: int) -> np.ndarray:
+    """(P, S) tap weights -> (bounces, P) float32 sums per path vertex."""
+    n_pixels = weight.shape[0]
+    per_vertex = weight.reshape(n_pixels, -1, bounces, aperture_samples).sum(axis=(1, 3))
+    return np.ascontiguousarray(per_vertex.T, dtype=np.float32)
 
 
 def sample_offsets(spp: int) -> np.ndarray:
@@ -128,21 +209,72 @@ def _inside(u: np.ndarray, v: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
         )
 
 
+def _check_lens(name: str, lens: object) -> ThinLens | None:
+    if lens is not None and not isinstance(lens, ThinLens):
+        raise InputError(name, "a virtus.optics.ThinLens or None", type(lens).__name__)
+    return lens
+
+
+def _check_count(name: str, value: object, high: int) -> int:
+    count = positive_int(name, value)
+    if count > high:
+        raise InputError(name, f"an integer in [1, {high}]", value)
+    return count
+
+
 class _Tracer:
     """Dr.Jit side of one pass: Mitsuba scene, camera and projector poses in its world."""
 
     def __init__(self, mi, dr, mscene, cam2world: Pose, proj2world: Pose) -> None:  # noqa: ANN001
         self.mi, self.dr, self.mscene = mi, dr, mscene
         self.cam2world = mi.Transform4f(cam2world.matrix.tolist())
+        self.proj2world = mi.Transform4f(proj2world.matrix.tolist())
         self.world2proj = mi.Transform4f(proj2world.inverse().matrix.tolist())
         self.world2cam_R = cam2world.R.T  # noqa: N815
         self.projector = mi.Point3f(*(float(x) for x in proj2world.t))
+        self.has_lights = len(mscene.emitters()) > 0
 
     def _rays(self, directions: np.ndarray):  # noqa: ANN202
         mi = self.mi
         d = mi.Vector3f(directions[0], directions[1], directions[2])
         ray = mi.Ray3f(mi.Point3f(0.0, 0.0, 0.0), d)
         return self.cam2world @ ray
+
+    def _indices(self, count: int, first: int):  # noqa: ANN202
+        """UInt32 global sample indices ``first, ..., first + count - 1``; ``first`` is an
+        opaque variable, so every chunk reuses one compiled kernel."""
+        mi, dr = self.mi, self.dr
+        return dr.arange(mi.UInt32, count) + dr.opaque(mi.UInt32, first)
+
+    def _random(self, key, stream: int):  # noqa: ANN001, ANN202
+        """Uniform [0, 1) Float per entry of ``key`` (UInt32), from stream ``stream``."""
+        mi = self.mi
+        return mi.sample_tea_float32(key, mi.UInt32(stream), _TEA_ROUNDS)
+
+    def _disk(self, stratum, count: int, radius_sample, angle):  # noqa: ANN001, ANN202
+        """Point of the unit disk in equal-area annulus ``stratum`` of ``count`` (a Vogel
+        spiral turned by ``angle``): uniform over the disk when ``radius_sample`` is uniform in
+        [0, 1) and ``angle`` uniform in [0, 2 pi)."""
+        mi, dr = self.mi, self.dr
+        index = mi.Float(stratum)
+        r = dr.sqrt((index + radius_sample) * (1.0 / count))
+        theta = angle + index * _GOLDEN_ANGLE
+        return r * dr.cos(theta), r * dr.sin(theta)
+
+    def _lens_rays(self, directions: np.ndarray, first: int, spp: int, lens: ThinLens):  # noqa: ANN202
+        """Thin-lens camera rays: from a stratified aperture point toward the point where the
+        pinhole ray meets the focus plane (see the module docstring)."""
+        mi, dr = self.mi, self.dr
+        d = mi.Vector3f(directions[0], directions[1], directions[2])
+        index = self._indices(len(directions[0]), first)
+        pixel = index // spp
+        shift = mi.sample_tea_32(pixel, mi.UInt32(_STREAM_CAMERA), _TEA_ROUNDS)[0] % spp
+        angle = 2.0 * dr.pi * self._random(pixel, _STREAM_CAMERA + 1)
+        x, y = self._disk((index % spp + shift) % spp, spp, self._random(index, 2), angle)
+        radius = 0.5 * lens.aperture_m
+        origin = mi.Point3f(radius * x, radius * y, 0.0)
+        focus = d * (lens.focus_distance_m / d.z)
+        return self.cam2world @ mi.Ray3f(origin, dr.normalize(focus - origin))
 
     def centre(self, directions: np.ndarray, cam2proj: Pose) -> dict[str, np.ndarray]:
         """Pixel-centre rays (3, N) float64, camera frame -> ground truth per ray: point
@@ -181,49 +313,144 @@ class _Tracer:
         dr.eval(*out.values())
         return {key: value.numpy() for key, value in out.items()}
 
-    def samples(
-        self, directions: np.ndarray, projector: Intrinsics, spp: int, ambient: float
-    ) -> dict[str, np.ndarray]:
-        """Supersample rays (3, N) float32 -> per sample: white-projector radiance divided by
-        ``spp`` (0 where unlit), projector coordinates (0 where unlit) and, with ambient
-        light, the diffuse reflectance.
-
-        Without projector distortion everything is computed here; with distortion the
-        normalised coordinates ``(x/z, y/z)`` are returned (keys ``xn``, ``yn``) for the
-        projector model to distort in numpy.
-        """
+    def _tap(self, si, bsdf, active, throughput, scale: float, projector: Intrinsics, aperture):  # noqa: ANN001, ANN202
+        """One tap of a path vertex: next-event estimation toward the projector centre
+        (``aperture`` None) or toward an aperture point ``(x, y, focus distance)`` in the
+        projector frame (metres). Returns Dr.Jit arrays: ``weight, u_p, v_p`` without
+        projector distortion, else ``radiance, xn, yn`` for numpy to distort."""
         mi, dr = self.mi, self.dr
-        ray = self._rays(directions)
-        si = self.mscene.ray_intersect(ray)
-        hit = si.is_valid()
-        occluded = self.mscene.ray_test(si.spawn_ray_to(self.projector), hit)
+        if aperture is None:
+            target = self.projector
+        else:
+            ax, ay, focus = aperture
+            target = self.proj2world @ mi.Point3f(ax, ay, 0.0)
+        occluded = self.mscene.ray_test(si.spawn_ray_to(target), active)
         p_proj = self.world2proj @ si.p
         z = p_proj.z
-        lit = hit & ~occluded & (z > 0)
-        to_projector = dr.normalize(self.projector - si.p)
-        bsdf = si.bsdf(ray)
+        lit = active & ~occluded & (z > 0)
+        to_projector = dr.normalize(target - si.p)
         f_cos = bsdf.eval(mi.BSDFContext(), si, si.to_local(to_projector), lit)[0]
         # pi f cos(theta_o) / (d^2 cos^3(theta_p)) = pi f cos(theta_o) |X_p| / z_p^3
-        radiance = dr.pi / spp * f_cos * dr.norm(p_proj) / (z * z * z)
+        radiance = scale * f_cos * dr.norm(p_proj) / (z * z * z)
+        if throughput is not None:
+            radiance = radiance * throughput
         inv_z = dr.select(lit, dr.rcp(z), 0.0)
-        xn, yn = p_proj.x * inv_z, p_proj.y * inv_z
-        out = {}
-        if projector.has_distortion:
-            out.update(xn=xn, yn=yn, radiance=dr.select(lit, radiance, 0.0))
+        if aperture is None:
+            xn, yn = p_proj.x * inv_z, p_proj.y * inv_z
         else:
-            u = float(projector.fx) * xn + float(projector.cx)
-            v = float(projector.fy) * yn + float(projector.cy)
-            lit &= (u >= -0.5) & (u < projector.width - 0.5)
-            lit &= (v >= -0.5) & (v < projector.height - 0.5)
-            out.update(
-                weight=dr.select(lit, radiance, 0.0),
-                u_p=dr.select(lit, u, 0.0),
-                v_p=dr.select(lit, v, 0.0),
+            # The line a -> X meets z = d_f at a + (X - a) d_f / z: its pinhole projection.
+            xn = dr.select(lit, ax / focus + (p_proj.x - ax) * inv_z, 0.0)
+            yn = dr.select(lit, ay / focus + (p_proj.y - ay) * inv_z, 0.0)
+        if projector.has_distortion:
+            return {"xn": xn, "yn": yn, "radiance": dr.select(lit, radiance, 0.0)}
+        u = float(projector.fx) * xn + float(projector.cx)
+        v = float(projector.fy) * yn + float(projector.cy)
+        lit &= (u >= -0.5) & (u < projector.width - 0.5)
+        lit &= (v >= -0.5) & (v < projector.height - 0.5)
+        return {
+            "weight": dr.select(lit, radiance, 0.0),
+            "u_p": dr.select(lit, u, 0.0),
+            "v_p": dr.select(lit, v, 0.0),
+        }
+
+    def _seen(self, si):  # noqa: ANN001, ANN202
+        """Radiance (Float) of the emitter a ray sees: the surface's area emitter where it
+        hits one, the environment where it hits nothing, else 0."""
+        return self.mi.Float(si.emitter(self.mscene).eval(si)[0])
+
+    def _lights(self, si, bsdf, active, throughput, index, vertex: int):  # noqa: ANN001, ANN202
+        """Radiance (Float) from the scene's emitters at a path vertex: one emitter sample
+        (Mitsuba's ``sample_emitter_direction``, visibility tested) times the BSDF."""
+        mi, dr = self.mi, self.dr
+        sample = mi.Point2f(
+            self._random(index, _STREAM_LIGHTS + 2 * vertex),
+            self._random(index, _STREAM_LIGHTS + 2 * vertex + 1),
+        )
+        ds, emitted = self.mscene.sample_emitter_direction(si, sample, True, active)
+        usable = active & (ds.pdf > 0)
+        f_cos = bsdf.eval(mi.BSDFContext(), si, si.to_local(ds.d), usable)[0]
+        radiance = dr.select(usable, f_cos * emitted[0], 0.0)
+        return radiance if throughput is None else radiance * throughput
+
+    def samples(
+        self,
+        directions: np.ndarray,
+        first: int,
+        projector: Intrinsics,
+        spp: int,
+        ambient: float,
+        bounces: int = 1,
+        projector_lens: ThinLens | None = None,
+        aperture_samples: int = 1,
+        camera_lens: ThinLens | None = None,
+    ) -> dict[str, np.ndarray]:
+        """Supersample rays (3, N) float32, camera frame, whose first has the global index
+        ``first`` -> per sample and tap (N, T) float32: white-projector radiance divided by
+        ``spp * aperture_samples`` (0 where unlit), projector coordinates (0 where unlit);
+        and per sample (N,): with ambient light the diffuse reflectance ``rho_d``, with
+        scene lights their radiance ``lights``.
+
+        Without projector distortion everything is computed here; with distortion the
+        normalised coordinates ``(x/z, y/z)`` are returned (keys ``xn``, ``yn``, and
+        ``radiance``) for the projector model to distort in numpy.
+        """
+        mi, dr = self.mi, self.dr
+        n = directions.shape[1]
+        if camera_lens is None:
+            ray = self._rays(directions)
+        else:
+            ray = self._lens_rays(directions, first, spp, camera_lens)
+        index = self._indices(n, first)
+        si = self.mscene.ray_intersect(ray)
+        hit = si.is_valid()
+        active, throughput = hit, None
+        scale = dr.pi / (spp * aperture_samples)
+        taps: list[dict] = []
+        per_sample = {}
+        # Scene lights: the emitters the camera ray sees (an area light, or the environment
+        # where it hits nothing); at later vertices only next-event estimation counts them.
+        lights = self._seen(si) if self.has_lights else None
+        for vertex in range(bounces):
+            bsdf = si.bsdf(ray)
+            if projector_lens is None:
+                taps.append(self._tap(si, bsdf, active, throughput, scale, projector, None))
+            else:
+                focus = projector_lens.focus_distance_m
+                radius = 0.5 * projector_lens.aperture_m
+                stream = _STREAM_PROJECTOR + vertex * 2048
+                angle = 2.0 * dr.pi * self._random(index, stream)
+                for j in range(aperture_samples):
+                    x, y = self._disk(
+                        j, aperture_samples, self._random(index, stream + 1 + j), angle
+                    )
+                    aperture = (radius * x, radius * y, focus)
+                    taps.append(self._tap(si, bsdf, active, throughput, scale, projector, aperture))
+            if lights is not None:
+                lights += self._lights(si, bsdf, active, throughput, index, vertex)
+            if vertex == 0 and ambient > 0:
+                per_sample["rho_d"] = dr.select(hit, bsdf.eval_diffuse_reflectance(si, hit)[0], 0.0)
+            if vertex + 1 == bounces:
+                break
+            stream = _STREAM_BSDF + 3 * vertex
+            sample = mi.Point2f(self._random(index, stream + 1), self._random(index, stream + 2))
+            bs, weight = bsdf.sample(
+                mi.BSDFContext(), si, self._random(index, stream), sample, active
             )
-        if ambient > 0:
-            out["rho_d"] = dr.select(hit, bsdf.eval_diffuse_reflectance(si, hit)[0], 0.0)
-        dr.eval(*out.values())
-        return {key: value.numpy() for key, value in out.items()}
+            throughput = weight[0] if throughput is None else throughput * weight[0]
+            active = active & (bs.pdf > 0) & (throughput > 0)
+            ray = si.spawn_ray(si.to_world(bs.wo))
+            # One kernel per vertex: the taps so far and the state the next vertex needs.
+            state = [a for tap in taps for a in tap.values()]
+            extra = [] if lights is None else [lights]
+            dr.eval(*state, *per_sample.values(), *extra, ray, throughput, active)
+            si = self.mscene.ray_intersect(ray, active)
+            active = active & si.is_valid()
+        if lights is not None:
+            per_sample["lights"] = lights
+        dr.eval(*[a for tap in taps for a in tap.values()], *per_sample.values())
+        out = {key: np.stack([tap[key].numpy() for tap in taps], axis=1) for key in taps[0]}
+        out.update({key: value.numpy() for key, value in per_sample.items()})
+        return out
 
 
 def trace(
@@ -233,6 +460,10 @@ def trace(
     spp: int = 4,
     cam2world: Pose | None = None,
     variant: str | None = None,
+    bounces: int = 1,
+    projector_lens: ThinLens | None = None,
+    camera_lens: ThinLens | None = None,
+    aperture_samples: int | None = None,
 ) -> Trace:
     """Trace one pose of ``rig`` in ``scene`` (see the module docstring for the model).
 
@@ -240,9 +471,22 @@ def trace(
     ----------
     rig : camera, projector and ``proj2cam``.
     scene : the scene; its world frame is the camera frame unless ``cam2world`` is given.
-    spp : supersamples per pixel, a perfect square (default 4 = 2 x 2).
+    spp : camera supersamples per pixel, a perfect square (default 4 = 2 x 2). With a
+        ``camera_lens`` each supersample also has its own aperture point, so depth of field
+        needs more (64 gives a smooth blur).
     cam2world : pose of the camera in the scene's world frame (default: identity).
     variant : Mitsuba variant (default: automatic, see :mod:`virtus.render.backend`).
+    bounces : path vertices per camera sample, 1 to :data:`MAX_BOUNCES`: 1 = direct light
+        only (the default), 2 adds light that bounced once (interreflections), ...
+    projector_lens : thin lens of the projector (defocus), or None for a pinhole.
+    camera_lens : thin lens of the camera (depth of field), or None for a pinhole.
+    aperture_samples : projector aperture samples per path vertex, 1 to
+        :data:`MAX_APERTURE_SAMPLES` (default :data:`DEFAULT_APERTURE_SAMPLES` with a
+        ``projector_lens``); only with a ``projector_lens``.
+
+    Returns
+    -------
+    :class:`Trace` with ``spp * bounces * aperture_samples`` taps per pixel.
     """
     if not isinstance(rig, Rig):
         raise InputError("rig", "a virtus.devices.Rig", type(rig).__name__)
@@ -251,6 +495,19 @@ def trace(
     cam2world = Pose.identity() if cam2world is None else cam2world
     offsets = sample_offsets(spp)
     spp = len(offsets)
+    bounces = _check_count("bounces", bounces, MAX_BOUNCES)
+    projector_lens = _check_lens("projector_lens", projector_lens)
+    camera_lens = _check_lens("camera_lens", camera_lens)
+    if projector_lens is None:
+        if aperture_samples not in (None, 1):
+            raise InputError(
+                "aperture_samples", "None or 1 without a projector_lens", aperture_samples
+            )
+        aperture_samples = 1
+    elif aperture_samples is None:
+        aperture_samples = DEFAULT_APERTURE_SAMPLES
+    else:
+        aperture_samples = _check_count("aperture_samples", aperture_samples, MAX_APERTURE_SAMPLES)
     check_in_front(scene, cam2world.inverse())
 
     mi, dr, variant_name = mitsuba(variant)
@@ -260,6 +517,9 @@ def trace(
     projector = rig.projector.intrinsics
     height, width = camera.height, camera.width
     n_pixels = height * width
+    n_rays = n_pixels * spp
+    if n_rays >= 2**32:
+        raise InputError("spp", f"at most {2**32 // n_pixels - 1} for {width} x {height} px", spp)
     centre_dirs, sample_dirs = _camera_rays(camera, spp)
     tracer = _Tracer(mi, dr, mscene, cam2world, cam2world @ rig.proj2cam)
 
@@ -269,7 +529,7 @@ def trace(
         tracer.centre(centre_t[:, i : i + _RAYS_PER_CHUNK], rig.cam2proj)
         for i in range(0, n_pixels, _RAYS_PER_CHUNK)
     ]
-    c = {key: np.concatenate([part[key] for part in parts]) for key in parts[0]}
+    c = _concatenate(parts)
     hit = c["hit"]
     points = np.stack([c["px"], c["py"], c["pz"]], axis=1)
     normals = np.stack([c["nx"], c["ny"], c["nz"]], axis=1).astype(np.float64)
@@ -282,6 +542,39 @@ def trace(
         [projector.fx * xy[:, 0] + projector.cx, projector.fy * xy[:, 1] + projector.cy], axis=1
     )
     outside = hit & ~_inside(proj_uv[:, 0], proj_uv[:, 1], projector)
+
+    # ---- supersamples: taps of projector coordinates and white-projector radiance ----
+    taps = bounces * aperture_samples
+    step = max(spp, _RAYS_PER_CHUNK // (spp * taps) * spp)
+    options = {
+        "bounces": bounces,
+        "projector_lens": projector_lens,
+        "aperture_samples": aperture_samples,
+        "camera_lens": camera_lens,
+    }
+    parts = [
+        tracer.samples(sample_dirs[:, i : i + step], i, projector, spp, scene.ambient, **options)
+        for i in range(0, n_rays, step)
+    ]
+    s = _concatenate(parts)
+    if projector.has_distortion:
+        xy = projector.distort_normalized(np.stack([s["xn"].ravel(), s["yn"].ravel()], axis=1))
+        u_p = (projector.fx * xy[:, 0] + projector.cx).astype(np.float32)
+        v_p = (projector.fy * xy[:, 1] + projector.cy).astype(np.float32)
+        radiance = s["radiance"].ravel()
+        lit = (radiance > 0) & _inside(u_p, v_p, projector)
+        weight = np.where(lit, radiance, np.float32(0.0))
+        u_p = np.where(lit, u_p, np.float32(0.0))
+        v_p = np.where(lit, v_p, np.float32(0.0))
+    else:
+        weight, u_p, v_p = s["weight"], s["u_p"], s["v_p"]
+    ambient = np.zeros(n_pixels, dtype=np.float32)
+    if "rho_d" in s:
+        ambient += np.float32(scene.ambient) * s["rho_d"].reshape(n_pixels, spp).mean(axis=1)
+    if "lights" in s:
+        ambient += s["lights"].reshape(n_pixels, spp).mean(axis=1, dtype=np.float32)
+    weight = weight.reshape(n_pixels, spp * taps)
+    per_vertex = _by_vertex(weight, bounces, aperture_samples)
     gt = GroundTruth(
         depth=points[:, 2].reshape(height, width),
         points=points.reshape(height, width, 3),
@@ -290,43 +583,27 @@ def trace(
         mask_hit=hit.reshape(height, width),
         mask_shadow=c["occluded"].reshape(height, width),
         mask_outside=outside.reshape(height, width),
+        mask_multibounce=(per_vertex[1:].sum(axis=0) > per_vertex[0]).reshape(height, width),
     )
-
-    # ---- supersamples: projector coordinates and white-projector radiance ----
-    n_rays = n_pixels * spp
-    step = max(spp, _RAYS_PER_CHUNK // spp * spp)
-    parts = [
-        tracer.samples(sample_dirs[:, i : i + step], projector, spp, scene.ambient)
-        for i in range(0, n_rays, step)
-    ]
-    s = {
-        key: np.concatenate([part[key] for part in parts]) if len(parts) > 1 else parts[0][key]
-        for key in parts[0]
-    }
-    if projector.has_distortion:
-        xy = projector.distort_normalized(np.stack([s["xn"], s["yn"]], axis=1))
-        u_p = (projector.fx * xy[:, 0] + projector.cx).astype(np.float32)
-        v_p = (projector.fy * xy[:, 1] + projector.cy).astype(np.float32)
-        lit = (s["radiance"] > 0) & _inside(u_p, v_p, projector)
-        weight = np.where(lit, s["radiance"], np.float32(0.0))
-        u_p = np.where(lit, u_p, np.float32(0.0))
-        v_p = np.where(lit, v_p, np.float32(0.0))
-    else:
-        weight, u_p, v_p = s["weight"], s["u_p"], s["v_p"]
-    if "rho_d" in s:
-        ambient = np.float32(scene.ambient) * s["rho_d"].reshape(n_pixels, spp).mean(axis=1)
-    else:
-        ambient = np.zeros(n_pixels, dtype=np.float32)
     return Trace(
         height=height,
         width=width,
         spp=spp,
         projector_width=projector.width,
         projector_height=projector.height,
-        weight=weight.reshape(n_pixels, spp),
-        u_p=u_p.reshape(n_pixels, spp),
-        v_p=v_p.reshape(n_pixels, spp),
+        weight=weight,
+        u_p=u_p.reshape(n_pixels, spp * taps),
+        v_p=v_p.reshape(n_pixels, spp * taps),
         ambient=ambient.astype(np.float32),
         gt=gt,
         variant=variant_name,
+        bounces=bounces,
+        aperture_samples=aperture_samples,
     )
+
+
+def _concatenate(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """Join the per-chunk arrays of each key along their first axis."""
+    if len(parts) == 1:
+        return parts[0]
+    return {key: np.concatenate([part[key] for part in parts]) for key in parts[0]}

@@ -1,0 +1,609 @@
+"""The calibration job: render a circle board in many poses with a scanner, calibrate it back.
+
+:func:`calibrate_rig` is the library function behind ``virtus calibrate``:
+
+1. The board (:class:`~virtus.calib.board.CircleBoard`) becomes a textured plane; the poses
+   (the paper's 18, ``random:N`` or a list) are checked against both fields.
+2. Each pose is captured with the scanner (its rig is the truth; its sequence, projector
+   model, sensor and spp are used as they are), with a capture seed derived from the
+   run's seed and the pose's index (:func:`pose_seed`). :func:`observe_pose` detects the
+   circles, refines their centroids on the board under uniform light and fits a local
+   camera->projector homography around each circle from the decoded projector coordinates.
+3. Camera, projector and their pose are solved (:mod:`virtus.calib.solve`) with OpenCV on
+   one thread and compared with the true rig (:mod:`virtus.calib.truth`). A degenerate
+   pose set (boards all nearly parallel: :func:`check_pose_spread`) is refused before any
+   pose is rendered, and again on the poses left usable for the solve.
+
+Output directory (``out_dir``; owned by the run through :func:`virtus.runs.claim_run`)::
+
+    OUT/run.json             the run record: command, configuration, status, owned files, log
+    OUT/.virtus.lock         the lock that keeps a second run out while this one runs
+    OUT/episode.json         true rig, scanner, board, poses, capture seeds, settings
+                             (written before the first pose)
+    OUT/poses/<name>.npz     one finished pose, written as soon as it is observed:
+                             board2cam (4, 4) float64 true board pose (board frame -> camera
+                             frame, metres), seed (capture seed), episode (SHA-256 of
+                             episode.json's content), cam_centroids (N, 2) float64 px,
+                             homographies (N, 3, 3) float64 camera px -> projector px
+                             (the last two absent when the board was not detected)
+    OUT/calibration.json     the result: rig schema (metres) + errors, per-pose residuals,
+                             board, poses, settings, truth comparison
+    OUT/calibration.yaml     the calibrated rig as OpenCV FileStorage YAML
+    OUT/paper_txt/*.txt      the paper code's text files
+    OUT/timing.json          seconds spent by this process (render, observe, calibrate)
+
+**Reproducible.** Two runs with the same scanner, board, poses and seed write byte-identical
+``calibration.json``, ``calibration.yaml``, ``paper_txt/*``, ``episode.json``, pose files
+and ``run.json``: captures are deterministic (counter-based noise), nothing written depends
+on time, and the solve runs OpenCV on one thread (its thread pool otherwise changes the
+summation order and the last digits). Only ``timing.json`` differs between runs.
+
+**Resumable.** Every file is written atomically and each finished pose at once, so a killed
+run loses at most the pose in progress. ``resume=True`` (``virtus calibrate --resume``)
+continues it: the configuration must equal the recorded one, finished poses are read back
+(each must belong to this episode) and never rendered again, and the result is byte for
+byte that of an uninterrupted run. :func:`recalibrate` solves again from the pose files.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import re
+import time
+import warnings
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from virtus import paper
+from virtus.calib.board import CircleBoard, board_from_spec
+from virtus.calib.detect import find_grid, refine_centres
+from virtus.calib.io import PAPER_TXT_FILES, save_opencv_yaml, save_paper_txt
+from virtus.calib.poses import BoardPose, check_pose, pose_set
+from virtus.calib.projector import local_homographies
+from virtus.calib.solve import MIN_POSES, PoseObservation, calibrate_observations
+from virtus.calib.truth import truth_error
+from virtus.capture import Capture
+from virtus.devices import Rig
+from virtus.errors import InputError, VirtusError
+from virtus.runs import (
+    RunDirectory,
+    atomic_write,
+    atomic_write_files,
+    claim_run,
+    config_digest,
+    directory_lock,
+    write_json_atomic,
+)
+from virtus.scanner import Scanner
+from virtus.sensor import MAX_SEED, as_seed
+
+#: The paper's reported numbers (DESIGN.md section 4), for summaries.
+PAPER_RMS_PX = paper.RMS_PX
+#: Gaussian softening (m, board plane) of the printed circles' edges, like slight lens
+#: defocus: with 4 spp the centroid error falls from ~0.005 px to ~0.001 px (measured on
+#: exact synthetic images); a symmetric blur leaves every circle's centroid in place.
+BOARD_BLUR_M = 2e-4
+#: Texel size (m) of the board texture: about a quarter of a camera pixel at 0.9 m.
+BOARD_TEXEL_M = 1e-4
+#: Most poses of ``random:N`` (each pose is a full capture: 200 are ~10,000 frames).
+MAX_RANDOM_POSES = 200
+#: Smallest allowed largest angle between the normals of the usable board poses. With every
+#: board (nearly) parallel the focal length is not observable (Zhang's method). Measured on
+#: three 7x13 poses with 0.01 px centroid noise: fx off by 4400 % at 0 deg, 21 % at 0.7 deg,
+#: 3-6 % at 1.4 deg, ~1 % at 2.8 deg, 0.2-0.6 % at 7 deg; the paper's poses span 60 deg.
+MIN_POSE_SPREAD_DEG = 5.0
+
+#: The job's name in ``run.json``.
+COMMAND = "calibrate"
+#: File names in the output directory (layout in the module docstring).
+CALIBRATION_FILE = "calibration.json"
+YAML_FILE = "calibration.yaml"
+PAPER_TXT_DIR = "paper_txt"
+EPISODE_FILE = "episode.json"
+POSE_DIR = "poses"
+TIMING_FILE = "timing.json"
+#: Files the result writes (:meth:`CalibrationResult.save`), relative to the directory.
+RESULT_FILES = (
+    CALIBRATION_FILE,
+    YAML_FILE,
+    *(f"{PAPER_TXT_DIR}/{name}" for name in PAPER_TXT_FILES.values()),
+)
+#: Everything the job may write: an earlier run's files without a ``run.json``.
+LAYOUT = (*RESULT_FILES, EPISODE_FILE, TIMING_FILE, f"{POSE_DIR}/*.npz")
+
+#: Progress callback: (poses done, poses total, name of the pose just finished).
+Progress = Callable[[int, int, str], None]
+
+
+@dataclass
+class CalibrationResult:
+    """Outcome of :func:`calibrate_rig`.
+
+    Attributes
+    ----------
+    rig : the calibrated rig.
+    rms_px : RMS reprojection error (px): ``camera``, ``projector`` (single-device
+        calibrations, bias-corrected points) and ``stereo`` (joint refinement, both devices).
+    per_pose : per used pose: name, RMS per device, calibrated ``board2cam``.
+    truth_error : :func:`virtus.calib.truth.truth_error` against the true rig (or None).
+    board : the board.
+    poses : every pose that was captured (including dropped ones).
+    dropped_poses : name -> reason.
+    settings : how the episode ran (poses spec, spp, pixel model, sensor, seed, ...).
+    true_rig : the rig that rendered the images, if known.
+    timing_s : seconds spent by this process (``render_s``, ``observe_s``,
+        ``calibrate_s``); not part of :meth:`to_dict`, which must not depend on the run.
+    """
+
+    rig: Rig
+    rms_px: dict[str, float]
+    per_pose: list[dict[str, Any]]
+    truth_error: dict[str, Any] | None
+    board: CircleBoard
+    poses: list[BoardPose]
+    dropped_poses: dict[str, str] = field(default_factory=dict)
+    settings: dict[str, Any] = field(default_factory=dict)
+    true_rig: Rig | None = None
+    timing_s: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``calibration.json`` content: rig schema (metres) + calibration fields."""
+        data = self.rig.to_dict()
+        data.update(
+            {
+                "rms_px": self.rms_px,
+                "paper_rms_px": PAPER_RMS_PX,
+                "per_pose": self.per_pose,
+                "dropped_poses": self.dropped_poses,
+                "board": self.board.to_dict(),
+                "poses": [p.to_dict() for p in self.poses],
+                "settings": self.settings,
+            }
+        )
+        if self.truth_error is not None:
+            data["truth_error"] = self.truth_error
+        if self.true_rig is not None:
+            data["true_rig"] = self.true_rig.to_dict()
+        return data
+
+    def save(self, path: str | Path) -> Path:
+        """Write ``calibration.json`` (or the given ``.json`` file) and return its path.
+
+        A directory path gets :data:`RESULT_FILES`: ``calibration.json``, the OpenCV YAML
+        (``calibration.yaml``) and the paper code's text files (``paper_txt/``), each
+        written atomically, ``calibration.json`` last.
+        """
+        path = Path(path)
+        if path.suffix.lower() == ".json":
+            return write_json_atomic(path, self.to_dict())
+        extras = {f"rms_{k}_px": v for k, v in self.rms_px.items()}
+        atomic_write(path / YAML_FILE, lambda tmp: save_opencv_yaml(self.rig, tmp, extras))
+        atomic_write_files(
+            path / PAPER_TXT_DIR,
+            list(PAPER_TXT_FILES.values()),
+            lambda staging: save_paper_txt(self.rig, staging),
+        )
+        return write_json_atomic(path / CALIBRATION_FILE, self.to_dict())
+
+
+# -- one pose -------------------------------------------------------------------------------
+
+
+def board_scene(board: CircleBoard, pose: BoardPose, texture: np.ndarray) -> Any:
+    """The scene of one pose: the board as a textured plane (world = camera frame)."""
+    from virtus.scene import Scene, TexturedPlaneObject
+
+    plane = TexturedPlaneObject(size_m=board.plane_size_m, texture=texture, pose=pose.board2cam)
+    return Scene(objects=[plane])
+
+
+def check_sequence(sequence: Any) -> None:
+    """Refuse a sequence that cannot calibrate a projector: it needs phase frames in both
+    directions (``u_p`` and ``v_p`` at every circle)."""
+    if tuple(sequence.directions) != ("v", "h"):
+        raise InputError(
+            "sequence",
+            "phase frames in both directions (v and h) to calibrate the projector",
+            f"directions {list(sequence.directions)}",
+        )
+
+
+def observe_pose(capture: Capture, board: CircleBoard, name: str) -> PoseObservation:
+    """Detect the circles and fit the projector homographies from one pose's capture.
+
+    Parameters
+    ----------
+    capture : the pose's capture; its sequence must have phase frames in both directions
+        (any coding: Gray, heterodyne, ...; white and black frames optional).
+    board : the board.
+    name : the pose's name.
+
+    Notes
+    -----
+    The circles are found in the white frame if the sequence has one, else in the phase
+    background ``A`` (the board under uniform light: the fringes average out), and their
+    centroids are refined on ``A``, where each frame's rounding is averaged out (on the
+    paper's sequence this cuts the centroid error from 0.0033 to 0.0014 px against the
+    white frame). Projector coordinates come from :meth:`Capture.decode`.
+    """
+    check_sequence(capture.sequence)
+    decoded = capture.decode()
+    uniform = decoded.background
+    kinds = [frame.kind for frame in capture.sequence.frames]
+    detect_on = capture.frames[kinds.index("white")] if "white" in kinds else uniform
+    centres = find_grid(detect_on, board)
+    if centres is None:
+        return PoseObservation(name, None, None)
+    centroids = refine_centres(uniform, board, centres)
+    homographies = local_homographies(decoded.proj_uv, board, centres)
+    return PoseObservation(name, centroids, homographies)
+
+
+def pose_seed(seed: int, index: int) -> int:
+    """Capture seed of pose ``index`` (0-based) of a run seeded with ``seed``: 63 bits of
+    ``SeedSequence([seed, index])``, so poses get independent noise streams and a resumed
+    run renders a pose exactly as the first run would have."""
+    state = np.random.SeedSequence([seed, index]).generate_state(1, dtype=np.uint64)
+    return int(state[0]) & MAX_SEED
+
+
+def _save_observation(
+    path: Path, *, pose: BoardPose, seed: int, episode: str, obs: PoseObservation
+) -> None:
+    arrays: dict[str, np.ndarray] = {
+        "board2cam": pose.board2cam.matrix,
+        "seed": np.array(seed, dtype=np.int64),
+        "episode": np.array(episode),
+    }
+    if obs.cam_centroids is not None:
+        arrays["cam_centroids"] = obs.cam_centroids
+    if obs.homographies is not None:
+        arrays["homographies"] = obs.homographies
+    np.savez(path, **arrays)
+
+
+def _load_observation(
+    path: Path, pose: BoardPose, seed: int | None, episode: str | None
+) -> PoseObservation:
+    """Read a pose file, checking it belongs to this pose (and episode, when given)."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {key: data[key] for key in data.files}
+    except (OSError, ValueError, KeyError, EOFError) as error:
+        raise VirtusError(f"{path}: not a readable pose file ({error})") from None
+    board2cam = arrays.get("board2cam")
+    mismatch = None
+    if board2cam is None or not np.array_equal(board2cam, pose.board2cam.matrix):
+        mismatch = "another board pose"
+    elif seed is not None and int(arrays.get("seed", -1)) != seed:
+        mismatch = "another capture seed"
+    elif episode is not None and str(arrays.get("episode", "")) != episode:
+        mismatch = "another episode (scanner, board or poses)"
+    if mismatch:
+        raise VirtusError(
+            f"{path} was made for {mismatch} than this run's pose {pose.name!r}; remove it "
+            "or start again with --overwrite"
+        )
+    return PoseObservation(pose.name, arrays.get("cam_centroids"), arrays.get("homographies"))
+
+
+# -- the episode ----------------------------------------------------------------------------
+
+
+def check_pose_spec(spec: str) -> str:
+    """``spec`` if it is ``"paper"`` or ``"random:N"`` with ``MIN_POSES <= N <=``
+    :data:`MAX_RANDOM_POSES`, else :class:`InputError` (checked before anything is done)."""
+    text = str(spec).strip().lower()
+    match = re.fullmatch(r"random:(\d{1,9})", text)
+    if text == "paper" or (match and MIN_POSES <= int(match.group(1)) <= MAX_RANDOM_POSES):
+        return text
+    raise InputError(
+        "poses", f"'paper' or 'random:N' with {MIN_POSES} <= N <= {MAX_RANDOM_POSES}", spec
+    )
+
+
+def _pose_list(
+    poses: str | list[BoardPose], rig: Rig, board: CircleBoard, seed: int, check: bool
+) -> list[BoardPose]:
+    if isinstance(poses, str):
+        return pose_set(poses, rig, board, np.random.default_rng(seed))
+    pose_list = list(poses)
+    names = [getattr(p, "name", None) for p in pose_list]
+    if not all(isinstance(p, BoardPose) for p in pose_list) or not pose_list:
+        raise InputError("poses", "'paper', 'random:N' or a non-empty list of BoardPose", poses)
+    # Names become file names (poses/<name>.npz): no separators, no hidden files.
+    bad = [n for n in names if not re.fullmatch(r"[^./\\\x00][^/\\\x00]{0,99}", n)]
+    if bad or len(set(names)) != len(names):
+        raise InputError("poses", "unique pose names usable as file names", bad or names)
+    if check:
+        for pose in pose_list:
+            check_pose(rig, board, pose)
+    return pose_list
+
+
+def _episode(
+    scanner: Scanner,
+    board: CircleBoard,
+    pose_list: list[BoardPose],
+    poses: str | list[BoardPose],
+    seed: int,
+    fix_intrinsics: bool,
+) -> dict[str, Any]:
+    """The ``episode.json`` content: everything that determines the run's results."""
+    settings = {
+        "poses": poses if isinstance(poses, str) else "custom",
+        "n_poses": len(pose_list),
+        "frames_per_pose": len(scanner.sequence),  # type: ignore[arg-type]
+        "spp": scanner.spp,
+        "lookup": scanner.projector.pixel.value,
+        "projector": scanner.projector.to_dict(),
+        "sensor": scanner.sensor.to_dict(),
+        "seed": seed,
+        "fix_intrinsics": fix_intrinsics,
+        "board_blur_m": BOARD_BLUR_M,
+        "board_texel_m": BOARD_TEXEL_M,
+    }
+    return {
+        "true_rig": scanner.rig.to_dict(),
+        "scanner": scanner.to_dict(),
+        "board": board.to_dict(),
+        "poses": [p.to_dict() for p in pose_list],
+        "pose_seeds": [pose_seed(seed, i) for i in range(len(pose_list))],
+        "settings": settings,
+    }
+
+
+@contextlib.contextmanager
+def _opencv_single_thread() -> Iterator[None]:
+    """Run OpenCV on one thread (reproducible sums: the result's last digits otherwise
+    depend on how its thread pool splits the work)."""
+    import cv2
+
+    previous = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        yield
+    finally:
+        cv2.setNumThreads(previous)
+
+
+def pose_spread_deg(poses: list[BoardPose]) -> float:
+    """Largest angle (deg) between the normals (board z axes) of a set of board poses."""
+    normals = np.array([pose.board2cam.R[:, 2] for pose in poses])
+    cosines = np.clip(normals @ normals.T, -1.0, 1.0)
+    return float(np.degrees(np.arccos(cosines.min())))
+
+
+def check_pose_spread(poses: list[BoardPose]) -> None:
+    """Refuse a degenerate pose set: every board (nearly) parallel to the others.
+
+    The check uses the poses the boards were rendered in (the job knows them exactly). The
+    solved poses cannot serve: with parallel boards the solve runs off to a wrong focal
+    length whose board poses may tilt by anything (measured 0.06-130 deg), and OpenCV's
+    standard deviation of fx stays tiny there (measured 1e-12-1e-4 relative).
+
+    Raises
+    ------
+    VirtusError : the largest angle between the boards' normals is below
+        :data:`MIN_POSE_SPREAD_DEG` (see there why).
+    """
+    spread = pose_spread_deg(poses)
+    if spread < MIN_POSE_SPREAD_DEG:
+        raise VirtusError(
+            f"calibration: the {len(poses)} usable board poses are nearly parallel "
+            f"(largest angle between their normals {spread:.2f} deg < "
+            f"{MIN_POSE_SPREAD_DEG:g} deg), so the focal lengths cannot be determined; "
+            "add poses tilted by 10-30 deg"
+        )
+
+
+def _solve(
+    episode: dict[str, Any],
+    board: CircleBoard,
+    pose_list: list[BoardPose],
+    observations: list[PoseObservation],
+    timing: dict[str, float],
+) -> CalibrationResult:
+    start = time.perf_counter()
+    true_rig = Rig.from_dict(episode["true_rig"])
+    cam, prj = true_rig.camera.intrinsics, true_rig.projector.intrinsics
+    with _opencv_single_thread():
+        solved = calibrate_observations(
+            board,
+            observations,
+            (cam.width, cam.height),
+            (prj.width, prj.height),
+            fix_intrinsics=episode["settings"]["fix_intrinsics"],
+        )
+    check_pose_spread([pose for pose in pose_list if pose.name in solved.used_poses])
+    timing["calibrate_s"] = time.perf_counter() - start
+    return CalibrationResult(
+        rig=solved.rig,
+        rms_px=solved.rms_px,
+        per_pose=solved.per_pose,
+        truth_error=truth_error(solved.rig, true_rig),
+        board=board,
+        poses=pose_list,
+        dropped_poses=solved.dropped_poses,
+        settings=episode["settings"],
+        true_rig=true_rig,
+        timing_s=timing,
+    )
+
+
+def calibrate_rig(
+    scanner: Scanner,
+    *,
+    board: str | CircleBoard = "7x13",
+    poses: str | list[BoardPose] = "paper",
+    rng: np.random.Generator | int | None = None,
+    progress: Progress | None = None,
+    out_dir: str | Path | None = None,
+    resume: bool = False,
+    overwrite: bool = False,
+    fix_intrinsics: bool = False,
+    check_poses: bool = True,
+) -> CalibrationResult:
+    """Capture a board in every pose with ``scanner`` and calibrate its rig back.
+
+    Parameters
+    ----------
+    scanner : the virtual scanner; its rig is the truth, its sequence (phase frames in both
+        directions), projector model, sensor and spp make the captures.
+    board : a :class:`CircleBoard` or ``"ROWSxCOLS"`` (paper: 4x7, 5x9, 7x13).
+    poses : ``"paper"``, ``"random:N"`` (3 <= N <= :data:`MAX_RANDOM_POSES`) or a list of
+        :class:`BoardPose` with unique names.
+    rng : the run's seed (int >= 0; ``None`` = 0; a Generator draws one): seeds the random
+        poses and, through :func:`pose_seed`, each pose's capture.
+    progress : called after each pose as ``progress(done, total, name)``.
+    out_dir : if given, the run owns this directory (layout in the module docstring): each
+        finished pose is written at once, the result at the end.
+    resume : continue the run in ``out_dir`` (same settings): finished poses are read back,
+        the others rendered.
+    overwrite : remove an earlier run's files in ``out_dir`` first.
+    fix_intrinsics : keep single-device intrinsics in the stereo step.
+    check_poses : check a given pose list against both fields first (raise on the first
+        pose outside); ``False`` captures them anyway (poses whose board is not fully seen
+        are then dropped with a warning).
+
+    Returns
+    -------
+    :class:`CalibrationResult`.
+
+    Raises
+    ------
+    InputError : bad arguments (checked before anything is rendered or written).
+    VirtusError : a pose outside the fields, fewer than 3 usable poses, a degenerate pose
+        set (:func:`check_pose_spread`, before anything is rendered and again on the usable
+        poses), or ``out_dir`` in use by another run or holding another run's files.
+    """
+    if not isinstance(scanner, Scanner):
+        raise InputError("scanner", "a virtus.scanner.Scanner", type(scanner).__name__)
+    if out_dir is None and (resume or overwrite):
+        raise InputError("out_dir", "a directory for resume/overwrite", None)
+    check_sequence(scanner.sequence)
+    if isinstance(poses, str):
+        poses = check_pose_spec(poses)  # "Random:6 " and "random:6" are one configuration
+    board = board_from_spec(board)
+    seed = as_seed(rng)
+    pose_list = _pose_list(poses, scanner.rig, board, seed, check_poses)
+    check_pose_spread(pose_list)
+    episode = _episode(scanner, board, pose_list, poses, seed, bool(fix_intrinsics))
+    if out_dir is None:
+        return _run_episode(scanner, board, pose_list, episode, progress, None)
+    config = {
+        "scanner": episode["scanner"],
+        "board": episode["board"],
+        "poses": poses if isinstance(poses, str) else episode["poses"],
+        "seed": seed,
+        "fix_intrinsics": bool(fix_intrinsics),
+        "check_poses": bool(check_poses),
+    }
+    with claim_run(
+        out_dir, COMMAND, config, layout=LAYOUT, overwrite=overwrite, resume=resume
+    ) as run:
+        return _run_episode(scanner, board, pose_list, episode, progress, run)
+
+
+def _run_episode(
+    scanner: Scanner,
+    board: CircleBoard,
+    pose_list: list[BoardPose],
+    episode: dict[str, Any],
+    progress: Progress | None,
+    run: RunDirectory | None,
+) -> CalibrationResult:
+    texture = board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=BOARD_BLUR_M)
+    digest = config_digest(episode)
+    timing = {"render_s": 0.0, "observe_s": 0.0, "calibrate_s": 0.0}
+    if run is not None:
+        pose_files = [f"{POSE_DIR}/{pose.name}.npz" for pose in pose_list]
+        run.own(EPISODE_FILE, *pose_files, *RESULT_FILES, TIMING_FILE)
+        # Same bytes as the first run's when resuming (the configuration is the same).
+        run.write_json(EPISODE_FILE, episode)
+    observations = []
+    for index, pose in enumerate(pose_list):
+        seed = episode["pose_seeds"][index]
+        name = f"{POSE_DIR}/{pose.name}.npz"
+        if run is not None and run.resumed and run.file(name).is_file():
+            observations.append(_load_observation(run.file(name), pose, seed, digest))
+            run.log(f"reused {pose.name}")
+        else:
+            start = time.perf_counter()
+            capture = scanner.capture(board_scene(board, pose, texture), rng=seed)
+            middle = time.perf_counter()
+            obs = observe_pose(capture, board, pose.name)
+            timing["render_s"] += middle - start
+            timing["observe_s"] += time.perf_counter() - middle
+            observations.append(obs)
+            if run is not None:
+                run.write(
+                    name, partial(_save_observation, pose=pose, seed=seed, episode=digest, obs=obs)
+                )
+                run.log(f"rendered {pose.name}")
+        if progress is not None:
+            progress(index + 1, len(pose_list), pose.name)
+    result = _solve(episode, board, pose_list, observations, timing)
+    if run is not None:
+        result.save(run.path)
+        run.write_json(TIMING_FILE, _timing_record(timing))
+    return result
+
+
+def _timing_record(timing: dict[str, float]) -> dict[str, Any]:
+    return {
+        "note": "seconds spent by the process that wrote this file (a resumed run: its "
+        "share only); the one file of the run that differs between identical runs",
+        "timing_s": timing,
+    }
+
+
+def recalibrate(out_dir: str | Path, *, fix_intrinsics: bool | None = None) -> CalibrationResult:
+    """Calibrate again from the observations a :func:`calibrate_rig` run saved.
+
+    Uses ``out_dir/episode.json`` and every finished ``out_dir/poses/<name>.npz`` (poses
+    whose file is missing, e.g. after an interrupted run, are left out with a warning), and
+    rewrites the result files (:data:`RESULT_FILES`) while holding the directory's lock.
+
+    Parameters
+    ----------
+    out_dir : the ``out_dir`` of the run.
+    fix_intrinsics : override the run's stereo option (default: as in the run).
+
+    Raises
+    ------
+    VirtusError : as :func:`calibrate_rig`'s solve; a pose file of another pose.
+    """
+    from virtus.safeio import read_json
+
+    out_dir = Path(out_dir)
+    with directory_lock(out_dir):
+        episode = read_json(out_dir / EPISODE_FILE, "calibration episode", expect=dict)
+        for key in ("true_rig", "board", "poses", "settings"):
+            if key not in episode:
+                raise InputError(f"{out_dir / EPISODE_FILE}", f"a '{key}' entry", "none")
+        episode["settings"] = {k: v for k, v in episode["settings"].items() if k != "timing_s"}
+        if fix_intrinsics is not None:
+            episode["settings"]["fix_intrinsics"] = bool(fix_intrinsics)
+        board = CircleBoard.from_dict(episode["board"])
+        seeds = episode.get("pose_seeds") or [None] * len(episode["poses"])
+        pose_list, observations = [], []
+        for item, seed in zip(episode["poses"], seeds, strict=True):
+            pose = BoardPose.from_dict(item)
+            path = out_dir / POSE_DIR / f"{pose.name}.npz"
+            if not path.is_file():
+                warnings.warn(
+                    f"calibration: pose {pose.name!r} left out: {path} missing", stacklevel=2
+                )
+                continue
+            pose_list.append(pose)
+            observations.append(_load_observation(path, pose, seed, None))
+        timing = {"render_s": 0.0, "observe_s": 0.0, "calibrate_s": 0.0}
+        result = _solve(episode, board, pose_list, observations, timing)
+        result.save(out_dir)
+        return result

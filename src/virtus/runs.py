@@ -1,0 +1,435 @@
+"""Run ownership of output directories: one job at a time, its record, atomic files.
+
+Every job that writes an output directory (``virtus calibrate``, ...) claims it with
+:func:`claim_run`::
+
+    with claim_run(out_dir, "calibrate", config, layout=("calibration.json", "poses/*.npz"),
+                   resume=resume, overwrite=overwrite) as run:
+        run.write_json("calibration.json", data)
+
+What a claim guarantees:
+
+* **One run at a time.** An exclusive, non-blocking ``fcntl.flock`` on ``OUT/.virtus.lock``
+  (which holds the owner's pid) is held for the whole run; a second run into the same
+  directory fails at once with ``OUT is in use by another virtus run (pid N)``. The lock
+  goes with the process, so a killed run never leaves the directory locked. The lock file
+  itself stays (removing it would let two runs lock two different files).
+* **A record.** ``OUT/run.json`` (:data:`RUN_FORMAT`) holds the command, its configuration,
+  the checksums of its input files, the virtus version, the ``status`` (``running``,
+  ``complete`` or ``failed`` with the ``error``), the ``files`` the run owns (relative
+  paths, registered *before* they are written, so the list is complete even after a
+  ``kill -9``) and a ``log`` of events. It holds nothing that depends on time or the
+  machine: two identical runs write the same ``run.json``.
+* **No mixing.** A directory holding another run's files (another command or another
+  configuration, or files of the command's ``layout`` without a ``run.json``) is refused,
+  naming the difference. ``overwrite=True`` removes the old run's files first: only the
+  files its ``run.json`` lists (or, without one, the files matching ``layout``), and the
+  directories they leave empty; nothing else in the directory is touched.
+* **Resume.** ``resume=True`` continues the run recorded in ``run.json``; its command,
+  configuration, input checksums and virtus version must equal this run's, else the
+  difference is named. Without a ``run.json``, a resumed run simply starts.
+* **Atomic files.** :func:`atomic_write` writes through a temporary file in ``.virtus-tmp/``
+  beside the target and ``os.replace``: a reader (or a resumed run) sees the old file or
+  the whole new one, never a partial file. An ``OSError`` (disk full, permission denied)
+  removes the temporary file and always carries the target's path, so the command line
+  prints it as one line.
+  Files are not fsync'ed: writes survive a killed process, not a power cut.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import fcntl
+import hashlib
+import json
+import os
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from virtus import __version__
+from virtus.errors import InputError, VirtusError
+from virtus.jsonio import json_default
+
+#: The run record in an output directory.
+RUN_FILE = "run.json"
+#: The lock file in an output directory (holds the pid of the run that owns it).
+LOCK_FILE = ".virtus.lock"
+#: Format tag of ``run.json``.
+RUN_FORMAT = "virtus.run/1"
+#: Staging directory (beside the targets) of the files :func:`atomic_write_files` writes.
+TMP_DIR = ".virtus-tmp"
+#: Keys of ``run.json`` that must match for a run to be resumed.
+_IDENTITY = ("command", "virtus_version", "config", "inputs")
+
+
+# -- atomic files ---------------------------------------------------------------------------
+
+
+def _with_filename(error: OSError, path: Path) -> OSError:
+    """``error`` with ``path`` attached when it names no file (e.g. a write to an open file)."""
+    if error.filename is not None:
+        return error
+    code = error.errno if error.errno is not None else errno.EIO
+    return type(error)(code, error.strerror or os.strerror(code), str(path))
+
+
+def atomic_write_files(
+    directory: str | os.PathLike[str], names: Sequence[str], write: Callable[[Path], object]
+) -> list[Path]:
+    """Write files atomically, one by one: ``write(staging)`` fills a staging directory with
+    ``names``, then each replaces its target in ``directory``.
+
+    Parameters
+    ----------
+    directory : where the files go (created if needed).
+    names : the file names ``write`` creates (plain names, no sub-directories).
+    write : called with the staging directory ``directory/.virtus-tmp`` (same file system,
+        so each rename is atomic; the files keep their names, so writers that choose a
+        format by extension work); it must write every name there.
+
+    Returns
+    -------
+    The target paths, in ``names`` order.
+
+    Raises
+    ------
+    OSError : from the writes or the renames, with a path as ``filename`` when the original
+        error named none; the staging files are removed and targets not yet replaced are
+        unchanged (each file is replaced atomically, the set is not).
+    """
+    directory = Path(directory)
+    staging = directory / TMP_DIR
+    targets = [directory / name for name in names]
+    try:
+        staging.mkdir(parents=True, exist_ok=True)
+        write(staging)
+        for name, target in zip(names, targets, strict=True):
+            os.replace(staging / name, target)
+    except OSError as error:
+        named = _with_filename(error, targets[0] if len(targets) == 1 else directory)
+        if named is error:
+            raise
+        raise named from error
+    finally:
+        for name in names:
+            with contextlib.suppress(OSError):
+                (staging / name).unlink(missing_ok=True)
+        with contextlib.suppress(OSError):  # still holds another writer's files
+            staging.rmdir()
+    return targets
+
+
+def atomic_write(path: str | os.PathLike[str], write: Callable[[Path], object]) -> Path:
+    """Write one file atomically: ``write(tmp)`` fills a temporary file that replaces ``path``.
+
+    The temporary file is ``<parent>/.virtus-tmp/<name>`` (see :func:`atomic_write_files`):
+    a reader sees the old file or the whole new one; on an ``OSError`` (raised with
+    ``path`` attached) the temporary file is removed and ``path`` is unchanged.
+    """
+    path = Path(path)
+    return atomic_write_files(path.parent, [path.name], lambda staging: write(staging / path.name))[
+        0
+    ]
+
+
+def json_text(data: Any) -> str:
+    """The JSON text virtus writes: 2-space indent, numpy values allowed, final newline."""
+    return json.dumps(data, indent=2, default=json_default, allow_nan=False) + "\n"
+
+
+def write_json_atomic(path: str | os.PathLike[str], data: Any) -> Path:
+    """Write ``data`` as JSON (:func:`json_text`) through :func:`atomic_write`."""
+    text = json_text(data)
+    return atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+
+
+def file_digest(path: str | os.PathLike[str]) -> str:
+    """``"sha256:<hex>"`` of a file's bytes."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return f"sha256:{digest.hexdigest()}"
+
+
+def canonical(data: Any) -> Any:
+    """``data`` as it reads back from JSON (tuples -> lists, numpy -> Python numbers)."""
+    return json.loads(json.dumps(data, default=json_default, allow_nan=False))
+
+
+def config_digest(config: Mapping[str, Any]) -> str:
+    """``"sha256:<hex>"`` of a configuration's canonical JSON (key order as given)."""
+    text = json.dumps(canonical(config), separators=(",", ":"))
+    return f"sha256:{hashlib.sha256(text.encode()).hexdigest()}"
+
+
+def first_difference(new: Any, old: Any, where: str = "") -> str | None:
+    """The first place where two JSON values differ, as ``"key.sub: A here, B in the run"``;
+    ``None`` when they are equal."""
+    if isinstance(new, dict) and isinstance(old, dict):
+        for key in [*new, *(k for k in old if k not in new)]:
+            place = f"{where}.{key}" if where else str(key)
+            if key not in old:
+                return f"{place}: set here, absent in the existing run"
+            if key not in new:
+                return f"{place}: absent here, set in the existing run"
+            found = first_difference(new[key], old[key], place)
+            if found:
+                return found
+        return None
+    if isinstance(new, list) and isinstance(old, list) and len(new) == len(old):
+        for index, (a, b) in enumerate(zip(new, old, strict=True)):
+            found = first_difference(a, b, f"{where}[{index}]")
+            if found:
+                return found
+        return None
+    if new == old:
+        return None
+    return f"{where or 'value'}: {_short(new)} here, {_short(old)} in the existing run"
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    text = json.dumps(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+# -- the lock -------------------------------------------------------------------------------
+
+
+@contextlib.contextmanager
+def directory_lock(directory: str | os.PathLike[str]) -> Iterator[Path]:
+    """Hold the exclusive lock of an output directory (created if needed).
+
+    Raises
+    ------
+    VirtusError : ``<dir> is in use by another virtus run (pid N)`` if another process holds
+        it (the call does not wait).
+    """
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    lock_path = directory / LOCK_FILE
+    fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            owner = os.pread(fd, 32, 0).decode(errors="replace").strip() or "unknown"
+            raise VirtusError(
+                f"{directory} is in use by another virtus run (pid {owner}); wait for it to "
+                "finish or choose another output directory"
+            ) from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        yield lock_path
+    finally:
+        os.close(fd)  # releases the lock
+
+
+# -- the run --------------------------------------------------------------------------------
+
+
+@dataclass
+class RunDirectory:
+    """An output directory owned by a running job (made by :func:`claim_run`).
+
+    Attributes
+    ----------
+    path : the directory.
+    command : the job's name (``"calibrate"``).
+    config : the job's configuration (canonical JSON values).
+    resumed : True when this run continues an earlier run of the same configuration.
+    record : the ``run.json`` content, kept up to date on disk.
+    """
+
+    path: Path
+    command: str
+    config: dict[str, Any]
+    resumed: bool = False
+    record: dict[str, Any] = field(default_factory=dict)
+
+    def file(self, name: str) -> Path:
+        """The path of ``name`` (relative, inside the directory)."""
+        return self.path / _relative(name)
+
+    def own(self, *names: str) -> None:
+        """Register files the run is about to write (so an overwrite can remove them)."""
+        files = self.record["files"]
+        new = [_relative(n) for n in names if _relative(n) not in files]
+        if new:
+            files.extend(new)
+            self._save()
+
+    def log(self, line: str) -> None:
+        """Append an event to ``run.json``'s ``log`` (no time stamps: runs stay comparable)."""
+        self.record["log"].append(str(line))
+        self._save()
+
+    def write(self, name: str, write: Callable[[Path], object]) -> Path:
+        """Register ``name`` and write it with :func:`atomic_write`."""
+        self.own(name)
+        return atomic_write(self.file(name), write)
+
+    def write_json(self, name: str, data: Any) -> Path:
+        """Register ``name`` and write ``data`` as JSON with :func:`write_json_atomic`."""
+        self.own(name)
+        return write_json_atomic(self.file(name), data)
+
+    def _save(self) -> None:
+        write_json_atomic(self.path / RUN_FILE, self.record)
+
+
+def _relative(name: str) -> str:
+    """A clean relative POSIX path inside the directory, or :class:`InputError`."""
+    path = Path(name)
+    if not name or path.is_absolute() or ".." in path.parts or path.name in (RUN_FILE, LOCK_FILE):
+        raise InputError("file name", "a relative path inside the output directory", name)
+    return path.as_posix()
+
+
+def _read_record(path: Path) -> dict[str, Any] | None:
+    from virtus.safeio import read_json
+
+    file = path / RUN_FILE
+    if not file.exists():
+        return None
+    record = read_json(file, "run record", expect=dict)
+    if record.get("format") != RUN_FORMAT or not isinstance(record.get("files"), list):
+        raise InputError(f"{file}", f"a {RUN_FORMAT} record", record.get("format"))
+    return record
+
+
+def _layout_files(path: Path, layout: Sequence[str]) -> list[str]:
+    """Existing files under ``path`` matching the ``layout`` patterns (relative, sorted)."""
+    found = set()
+    for pattern in layout:
+        for match in path.glob(pattern):
+            if match.is_file():
+                found.add(match.relative_to(path).as_posix())
+    return sorted(found)
+
+
+def _remove_files(path: Path, names: Sequence[str]) -> None:
+    """Remove the listed files (and their leftover temporary files), then the directories
+    they leave empty; anything else stays."""
+    parents = set()
+    for name in names:
+        target = path / _relative(name)
+        for candidate in (target, target.parent / TMP_DIR / target.name):
+            if candidate.is_file() or candidate.is_symlink():
+                candidate.unlink()
+        relative = target.relative_to(path)
+        parents.add(relative.parent / TMP_DIR)
+        parents.update(p for p in relative.parents if str(p) != ".")
+    for parent in sorted(parents, key=lambda p: len(p.parts), reverse=True):
+        with contextlib.suppress(OSError):  # not empty: it holds other files
+            (path / parent).rmdir()
+
+
+def _describe(record: dict[str, Any]) -> str:
+    return f"a `virtus {record.get('command')}` run ({record.get('status')})"
+
+
+@contextlib.contextmanager
+def claim_run(
+    out_dir: str | os.PathLike[str],
+    command: str,
+    config: Mapping[str, Any],
+    *,
+    inputs: Mapping[str, str | os.PathLike[str]] | None = None,
+    layout: Sequence[str] = (),
+    overwrite: bool = False,
+    resume: bool = False,
+) -> Iterator[RunDirectory]:
+    """Own ``out_dir`` for one run of ``command`` (see the module docstring).
+
+    Parameters
+    ----------
+    out_dir : the output directory (created if needed).
+    command : the job's name, e.g. ``"calibrate"``.
+    config : JSON-ready settings that determine the run's output; resuming requires equal
+        settings.
+    inputs : name -> input file whose SHA-256 is recorded (and compared on resume).
+    layout : glob patterns (relative) of the files the command writes, e.g.
+        ``("calibration.json", "poses/*.npz")``: such files without a ``run.json`` are an
+        earlier run's and are refused (or removed by ``overwrite``).
+    overwrite : remove an earlier run's files first.
+    resume : continue the earlier run recorded in ``out_dir/run.json``.
+
+    Yields
+    ------
+    :class:`RunDirectory`; ``run.json`` says ``complete`` when the block ends normally and
+    ``failed`` (with the error) when it raises.
+
+    Raises
+    ------
+    VirtusError : the directory is locked by another run, or holds another run's files.
+    InputError : ``overwrite`` and ``resume`` together.
+    """
+    if overwrite and resume:
+        raise InputError("overwrite, resume", "at most one of them", "both")
+    path = Path(out_dir)
+    config = canonical(dict(config))
+    checksums = {str(k): file_digest(v) for k, v in (inputs or {}).items()}
+    with directory_lock(path):
+        old = _read_record(path)
+        identity = {
+            "command": command,
+            "virtus_version": __version__,
+            "config": config,
+            "inputs": checksums,
+        }
+        resumed = False
+        if old is not None:
+            difference = first_difference(identity, {k: old.get(k) for k in _IDENTITY})
+            if overwrite:
+                _remove_files(path, old["files"])
+            elif resume and difference is None:
+                resumed = True
+            elif resume:
+                raise VirtusError(
+                    f"cannot resume in {path}: it holds {_describe(old)} with other settings "
+                    f"({difference}); pass --overwrite to start again"
+                )
+            elif difference is None:
+                raise VirtusError(
+                    f"{path} already holds {_describe(old)} with these settings; pass --resume "
+                    "to continue it or --overwrite to start again"
+                )
+            else:
+                raise VirtusError(
+                    f"{path} holds {_describe(old)} with other settings ({difference}); "
+                    "pass --overwrite to replace it, or choose another output directory"
+                )
+        else:
+            stale = _layout_files(path, layout)
+            if stale and overwrite:
+                _remove_files(path, stale)
+            elif stale:
+                raise VirtusError(
+                    f"{path} holds files of an earlier run without {RUN_FILE} "
+                    f"({', '.join(stale[:3])}{', ...' if len(stale) > 3 else ''}); pass "
+                    "--overwrite to replace them, or choose another output directory"
+                )
+        record = {
+            "format": RUN_FORMAT,
+            **identity,
+            "status": "running",
+            "files": list(old["files"]) if resumed else [],
+            "log": list(old.get("log", [])) if resumed else [],
+        }
+        run = RunDirectory(path, command, config, resumed, record)
+        run.log("resume" if resumed else "start")
+        try:
+            yield run
+        except BaseException as error:
+            record["status"] = "failed"
+            record["error"] = f"{type(error).__name__}: {error}"
+            with contextlib.suppress(OSError):  # keep the original error
+                run._save()
+            raise
+        record["status"] = "complete"
+        record.pop("error", None)
+        run._save()
