@@ -23,14 +23,15 @@ from pathlib import Path
 
 import numpy as np
 
-from virtus.capture import GT_NAMES, write_frames
 from virtus.devices import default_rig
+from virtus.groundtruth import ARRAY_NAMES as GT_NAMES
+from virtus.images import write_frames
 from virtus.patterns import default_sequence
 from virtus.render import render, synthesize, trace
-from virtus.sensor import Sensor
 from virtus.render.reference import ReferenceRenderer
 from virtus.render.synthesis_jit import synthesize_digital
 from virtus.scene import default_scene
+from virtus.sensor import Sensor
 
 
 def timed(function, repeats: int) -> tuple[list[float], object]:

@@ -448,7 +448,10 @@ class _Tracer:
         if lights is not None:
             per_sample["lights"] = lights
         dr.eval(*[a for tap in taps for a in tap.values()], *per_sample.values())
-        out = {key: np.stack([tap[key].numpy() for tap in taps], axis=1) for key in taps[0]}
+        if len(taps) == 1:  # a view, no copy (the ideal renderer's case)
+            out = {key: value.numpy()[:, None] for key, value in taps[0].items()}
+        else:
+            out = {key: np.stack([tap[key].numpy() for tap in taps], axis=1) for key in taps[0]}
         out.update({key: value.numpy() for key, value in per_sample.items()})
         return out
 
