@@ -22,6 +22,7 @@ Frames of 10, 12 and 16 bits are stored as uint16, 8-bit frames as uint8.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from types import ModuleType
@@ -82,6 +83,17 @@ def standard_normal(seed: int, frame: int, pixels: slice) -> np.ndarray:
 #: the same for every capture of one sensor, as a real sensor's pattern is.
 _PRNU_STREAM = 1 << 40
 _DSNU_STREAM = (1 << 40) + 1
+
+
+@functools.lru_cache(maxsize=4)
+def _fixed_pattern(seed: int, stream: int, n_pixels: int) -> np.ndarray:
+    """Read-only (n_pixels,) float32 standard normals of a fixed-pattern map, drawn once per
+    sensor and image size from the counter-based stream ``(seed, stream, block)`` (so any
+    prefix equals the map of a smaller image). Cached: every frame of every capture reads
+    the same map."""
+    values = standard_normal(seed, stream, slice(0, n_pixels))
+    values.setflags(write=False)
+    return values
 
 
 @dataclass(frozen=True)
@@ -275,28 +287,35 @@ class Sensor:
     def _electrons_to_dn(
         self, signal_dn: np.ndarray, seed: int, frames: np.ndarray, pixels: slice
     ) -> np.ndarray:
-        """EMVA model of a (F, n) block whose noise-free signal is ``signal_dn`` (DN)."""
+        """EMVA model of a (F, n) block whose noise-free signal is ``signal_dn`` (DN); works
+        in place on ``signal_dn`` (a fresh float32 array)."""
         gain = np.float32(self.system_gain_dn_per_e)
-        electrons = signal_dn / gain
+        electrons = signal_dn
+        scale = np.float32(1.0) / gain
         if self.prnu:
-            electrons *= 1 + np.float32(self.prnu) * standard_normal(
-                self.fixed_pattern_seed, _PRNU_STREAM, pixels
-            )
+            prnu = _fixed_pattern(self.fixed_pattern_seed, _PRNU_STREAM, pixels.stop)[pixels]
+            scale = scale * (np.float32(1.0) + np.float32(self.prnu) * prnu)
+        electrons *= scale
         dark_current = np.float32(self.dark_current_e_per_s * self.exposure_time_s)
-        variance = np.maximum(electrons, 0) + dark_current + np.float32(self.dark_noise_e**2)
-        sigma = np.sqrt(variance, dtype=np.float32)
+        # Temporal noise: shot noise of signal and dark current, and the dark (read) noise.
+        sigma = np.maximum(electrons, np.float32(0.0))
+        sigma += dark_current + np.float32(self.dark_noise_e**2)
+        np.sqrt(sigma, out=sigma)
         for row, frame in enumerate(frames):
-            electrons[row] += sigma[row] * standard_normal(seed, int(frame), pixels)
-        electrons += dark_current
+            sigma[row] *= standard_normal(seed, int(frame), pixels)
+        electrons += sigma
+        offset = dark_current
         if self.dsnu_e:
-            electrons += np.float32(self.dsnu_e) * standard_normal(
-                self.fixed_pattern_seed, _DSNU_STREAM, pixels
-            )
+            dsnu = _fixed_pattern(self.fixed_pattern_seed, _DSNU_STREAM, pixels.stop)[pixels]
+            offset = offset + np.float32(self.dsnu_e) * dsnu
+        electrons += offset
         if self.saturation_capacity_e is not None:
             # Only the top is clipped: the dark (read) noise is added after the well, and
             # the black level keeps it above zero DN.
             np.minimum(electrons, np.float32(self.saturation_capacity_e), out=electrons)
-        return electrons * gain + np.float32(self.black_level_dn)
+        electrons *= gain
+        electrons += np.float32(self.black_level_dn)
+        return electrons
 
     def digitize_jit(self, radiance: Any, exposure: float, dr: ModuleType) -> Any:
         """:meth:`digitize` of a noise-free sensor on a Dr.Jit Float array (on the device
