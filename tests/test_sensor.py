@@ -209,3 +209,41 @@ def test_full_well_and_adc_saturate() -> None:
     )
     b, _ = _flat_pair(well, 5000.0, 1000)
     assert np.all(b == 1000)
+
+
+def test_vignetting_scales_each_pixel_by_cos4() -> None:
+    from virtus.render import render
+
+    rig = small_rig()
+    sequence = default_sequence()
+    white = sequence.index_of("white")
+    plain = Sensor(bit_depth=16, exposure=20000.0)
+    vignetted = plain.with_(vignetting="cos4")
+    a = render(rig, default_scene(), sequence, sensor=plain).frames[white].astype(np.float64)
+    b = render(rig, default_scene(), sequence, sensor=vignetted).frames[white].astype(np.float64)
+    gain = vignetted.vignetting_gain(rig.camera.intrinsics).reshape(a.shape)
+    bright = a > 1000
+    np.testing.assert_allclose(b[bright], a[bright] * gain[bright], rtol=1e-3, atol=1.0)
+    assert gain.min() < 0.99  # the corners really are darker
+    with pytest.raises(InputError, match="^vignetting"):
+        Sensor(vignetting="cos3")
+
+
+def test_saturated_pixels_are_in_the_ground_truth(tmp_path) -> None:
+    from virtus.capture import Capture
+    from virtus.render import render
+
+    rig = small_rig()
+    sequence = default_sequence()
+    too_bright = Sensor(exposure=400.0)  # the white frame's radiance is ~1 on the sphere
+    rendering = render(rig, default_scene(), sequence, sensor=too_bright)
+    expected = (rendering.frames >= 255).any(axis=0)
+    assert 0 < expected.mean() < 1
+    np.testing.assert_array_equal(rendering.gt.mask_saturated, expected)
+    # A full well below the ADC's range saturates there instead.
+    well = Sensor(bit_depth=12, system_gain_dn_per_e=0.1, saturation_capacity_e=20000.0)
+    assert well.saturation_dn == 2000
+    # It travels with the capture.
+    capture = Capture(sequence, rig, frame_data=rendering.frames, gt_data=rendering.gt)
+    loaded = Capture.load(capture.save(tmp_path / "c").parent)
+    np.testing.assert_array_equal(loaded.ground_truth.mask_saturated, expected)

@@ -20,10 +20,11 @@ ARRAY_NAMES = (
     "mask_shadow",
     "mask_outside",
     "mask_multibounce",
+    "mask_saturated",
 )
 #: Arrays that captures written before they existed lack; :meth:`GroundTruth.from_arrays`
 #: gives them their defaults.
-OPTIONAL_ARRAY_NAMES = ("mask_multibounce",)
+OPTIONAL_ARRAY_NAMES = ("mask_multibounce", "mask_saturated")
 
 
 @dataclass(frozen=True, eq=False)
@@ -48,6 +49,8 @@ class GroundTruth:
         (light paths with one or more bounces before the camera's surface point) exceeds the
         direct one: a decoded phase there is dominated by indirect light. All False for a
         single-bounce render, and the default (captures written before it existed).
+    mask_saturated : (H, W) bool, the pixel reached the camera's full scale (ADC or full
+        well) in at least one frame; its phase is clipped. All False by default.
     """
 
     depth: np.ndarray
@@ -58,16 +61,17 @@ class GroundTruth:
     mask_shadow: np.ndarray
     mask_outside: np.ndarray
     mask_multibounce: np.ndarray | None = None
+    mask_saturated: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        if self.mask_multibounce is None:
-            object.__setattr__(self, "mask_multibounce", np.zeros_like(self.mask_hit, dtype=bool))
-        elif np.shape(self.mask_multibounce) != np.shape(self.mask_hit):
-            raise InputError(
-                "mask_multibounce",
-                f"shape {np.shape(self.mask_hit)} (the camera image)",
-                np.shape(self.mask_multibounce),
-            )
+        for name in OPTIONAL_ARRAY_NAMES:
+            value = getattr(self, name)
+            if value is None:
+                object.__setattr__(self, name, np.zeros_like(self.mask_hit, dtype=bool))
+            elif np.shape(value) != np.shape(self.mask_hit):
+                raise InputError(
+                    name, f"shape {np.shape(self.mask_hit)} (the camera image)", np.shape(value)
+                )
 
     @property
     def mask(self) -> np.ndarray:

@@ -24,7 +24,8 @@ intersection behind either device) come back as NaN; nothing is clamped.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Literal
+from enum import StrEnum
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -37,6 +38,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "Use",
+    "as_use",
     "depth_edge_mask",
     "depth_map",
     "normals_from_points",
@@ -45,8 +47,22 @@ __all__ = [
     "valid_points",
 ]
 
-Use = Literal["uv", "u", "v"]
-_USES = ("uv", "u", "v")
+class Use(StrEnum):
+    """Which decoded projector coordinates constrain a triangulated point: ``uv`` (both:
+    ray-ray least squares), ``u`` or ``v`` (one: ray-surface intersection)."""
+
+    uv = "uv"
+    u = "u"
+    v = "v"
+
+
+def as_use(value: object) -> Use:
+    """``value`` as a :class:`Use`, or :class:`InputError` naming ``use``."""
+    try:
+        return Use(value)
+    except ValueError:
+        raise InputError("use", f"one of {[m.value for m in Use]}", value) from None
+
 
 #: Rays closer to parallel than this (sine of the angle between them) are not intersected:
 #: at 1e-9 rad the depth is undetermined far beyond any working volume.
@@ -60,7 +76,7 @@ def triangulate(
     rig: Rig,
     cam_px: object,
     proj_uv: object,
-    use: Use = "uv",
+    use: Use = Use.uv,
 ) -> np.ndarray:
     """Triangulate camera pixels against decoded projector coordinates.
 
@@ -85,8 +101,7 @@ def triangulate(
     proj = as_points("proj_uv", proj_uv, 2, allow_nan=True)
     if proj.shape[0] != cam.shape[0]:
         raise InputError("proj_uv", f"{cam.shape[0]} rows like cam_px", f"{proj.shape[0]} rows")
-    if use not in _USES:
-        raise InputError("use", "one of 'uv', 'u', 'v'", use)
+    use = as_use(use)
 
     needed = proj if use == "uv" else proj[:, :1] if use == "u" else proj[:, 1:]
     valid = np.isfinite(needed).all(axis=1)
@@ -109,7 +124,7 @@ def points_from_decoded(
     rig: Rig,
     proj_uv: object,
     mask: object | None = None,
-    use: Use = "uv",
+    use: Use = Use.uv,
 ) -> np.ndarray:
     """Triangulate a whole decoded image.
 
@@ -140,7 +155,7 @@ def depth_map(
     rig: Rig,
     proj_uv: object,
     mask: object | None = None,
-    use: Use = "uv",
+    use: Use = Use.uv,
 ) -> np.ndarray:
     """Depth (camera-frame z, metres) per camera pixel; NaN where invalid.
 

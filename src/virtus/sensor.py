@@ -36,6 +36,8 @@ from virtus.safeio import check_keys
 
 #: Camera ADC bit depths.
 BIT_DEPTHS = (8, 10, 12, 16)
+#: Camera vignetting models.
+VIGNETTING = ("none", "cos4")
 #: Pixels per counter-based noise block (part of the noise stream's definition: changing it
 #: changes the bytes of every noisy capture).
 NOISE_BLOCK_PIXELS = 1 << 14
@@ -136,6 +138,8 @@ class Sensor:
     prnu : photo-response non-uniformity, standard deviation of the relative gain (0.01 = 1 %).
     black_level_dn : offset added before the ADC, DN (keeps dark noise above 0).
     fixed_pattern_seed : seed of the PRNU and DSNU maps.
+    vignetting : ``"none"`` or ``"cos4"``: the camera lens's natural fall-off
+        ``cos(theta)**4`` of the angle between a pixel's ray and the optical axis.
     name : preset name, for reports.
     """
 
@@ -153,6 +157,7 @@ class Sensor:
     prnu: float = 0.0
     black_level_dn: float = 0.0
     fixed_pattern_seed: int = 0
+    vignetting: str = "none"
     name: str = "custom"
 
     def __post_init__(self) -> None:
@@ -184,6 +189,8 @@ class Sensor:
                 "black_level_dn", f"< full scale {self.full_scale}", self.black_level_dn
             )
         object.__setattr__(self, "fixed_pattern_seed", as_seed(self.fixed_pattern_seed))
+        if self.vignetting not in VIGNETTING:
+            raise InputError("vignetting", f"one of {VIGNETTING}", self.vignetting)
         if not isinstance(self.name, str) or not self.name:
             raise InputError("name", "a non-empty string", self.name)
         noisy = any((self.dark_noise_e, self.dark_current_e_per_s * self.exposure_time_s,
@@ -207,6 +214,24 @@ class Sensor:
     def dtype(self) -> type[np.unsignedinteger]:
         """numpy dtype of the frames."""
         return np.uint8 if self.bit_depth == 8 else np.uint16
+
+    @property
+    def saturation_dn(self) -> int:
+        """The digital number at and above which a pixel is saturated: the full well's
+        (``K * well + black``) or the ADC's full scale, whichever is lower."""
+        if self.saturation_capacity_e is None:
+            return self.full_scale
+        well = self.system_gain_dn_per_e * self.saturation_capacity_e + self.black_level_dn  # type: ignore[operator]
+        return int(min(self.full_scale, np.floor(well)))
+
+    def vignetting_gain(self, intrinsics: Any) -> np.ndarray:
+        """(P,) float32 relative irradiance of each camera pixel (row-major): 1 without
+        vignetting, ``cos(theta)**4`` of the pixel-centre ray with ``"cos4"``."""
+        n = intrinsics.width * intrinsics.height
+        if self.vignetting == "none":
+            return np.ones(n, dtype=np.float32)
+        rays = intrinsics.unproject(intrinsics.pixel_grid().reshape(-1, 2))
+        return (rays[:, 2] ** 4).astype(np.float32)
 
     @property
     def noisy(self) -> bool:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -154,6 +155,13 @@ def render(
         camera_lens=camera_lens,
         aperture_samples=aperture_samples,
     )
+    if sensor.vignetting != "none":
+        # The camera lens's fall-off scales everything a pixel receives (auto exposure
+        # then sees the vignetted white frame, as a real camera's does).
+        gain = sensor.vignetting_gain(rig.camera.intrinsics)
+        traced = dataclasses.replace(
+            traced, weight=traced.weight * gain[:, None], ambient=traced.ambient * gain
+        )
     exposure_value = sensor.exposure_for(traced.white)
     if synthesis == "jit" or (synthesis == "auto" and traced.variant.startswith("cuda")):
         frames = synthesize_digital(
@@ -174,9 +182,10 @@ def render(
             threads=threads,
             **options,
         )
+    saturated = (frames >= sensor.saturation_dn).any(axis=0)
     return Rendering(
         frames=frames,
-        gt=traced.gt,
+        gt=dataclasses.replace(traced.gt, mask_saturated=saturated),
         exposure=exposure_value,
         sensor=sensor,
         seed=seed,
