@@ -774,12 +774,18 @@ def _relative_paths(data: Mapping[str, Any], base: Path) -> dict[str, Any]:
 
 
 def load_scene(path: str | Path) -> Scene:
-    """Read a scene YAML file (see the module docstring).
+    """Read a scene YAML file (see the module docstring) or a USD stage.
 
     The file is read through :func:`virtus.safeio.read_yaml` (size, UTF-8, aliases, depth,
     syntax) and must hold a mapping; unknown keys and values out of bounds raise
-    :class:`InputError`.
+    :class:`InputError`. A ``.usda``/``.usdc``/``.usd`` stage is read by
+    :func:`virtus.usd.load_usd_scene` (needs usd-core): its meshes, transforms, materials
+    and camera pose, the objects expressed in the stage camera's frame.
     """
+    if Path(path).suffix.lower() in (".usda", ".usdc", ".usd"):
+        from virtus.usd import load_usd_scene
+
+        return load_usd_scene(path)
     data = read_yaml(path, "scene", expect=dict)
     return Scene.from_dict(data, base_dir=Path(path).parent)
 

@@ -1,4 +1,5 @@
-"""Asymmetric circle-grid calibration boards: geometry, the paper's scale equations, texture.
+"""Calibration boards: asymmetric circle grids (the paper's scale equations) and
+checkerboards; their geometry, textures and text specs (:func:`board_from_spec`).
 
 Board frame (metres): origin at the centre of the plane (= centre of the texture), x along
 the texture columns, y along the texture rows, z = x cross y (pointing into the board, away
@@ -17,12 +18,30 @@ and scales it onto a plane of size (W_plane, H_plane) by S = min(W_plane / W_pat
 H_plane / H_pat), so every length D (mm) becomes D_sim = D k S in the scene. ``H_pat``
 ignores the half-spacing shift of odd columns, so the circles reach ``D_centers / 4`` into
 the top and bottom borders; :class:`CircleBoard` checks that every circle stays on the plane.
+
+Circles are dark on a light board (black-on-white, ``circle_level < background_level``) or
+light on a dark one (white-on-black, ``circle_level > background_level``).
+
+:class:`CheckerBoard`: ``rows`` x ``cols`` *inner* corners (OpenCV's ``patternSize`` is
+``(cols, rows)``) of squares ``square_mm`` wide, in the same board frame: corner ``r * cols +
+c`` at ``((c - (cols - 1) / 2) s, (r - (rows - 1) / 2) s, 0)``; the square beyond corner 0
+(towards -x, -y) is dark. ``rows + cols`` must be odd: the board then differs from its half
+turn, so the order of its corners is unambiguous.
+
+Specs (:func:`board_from_spec`; lengths in millimetres, always stated)::
+
+    7x13                                   the paper's circle board (scaled onto 0.2 x 0.2 m)
+    circles:4x11,spacing_mm=40,diameter_mm=20[,border_mm=20][,white_on_black]
+    checker:6x9,square_mm=25[,border_mm=20]
+    board.json / board.yaml                a board's to_dict() (its "type" says which)
 """
 
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -53,7 +72,8 @@ class CircleBoard:
     circle_level, background_level : texture values (albedo factors in [0, 1]) of the circles
         and of the paper. Dark grey rather than black circles keep the fringe modulation
         inside the circles high enough to decode the phase there (0.25 keeps a 4:1
-        contrast, ample for blob detection).
+        contrast, ample for blob detection). ``circle_level > background_level`` describes
+        a white-on-black board (light circles).
     """
 
     rows: int = 7
@@ -84,10 +104,10 @@ class CircleBoard:
             value = getattr(self, name)
             if not 0.0 <= value <= 1.0:
                 raise InputError(name, "a value in [0, 1]", value)
-        if self.circle_level >= self.background_level:
+        if self.circle_level == self.background_level:
             raise InputError(
                 "circle_level",
-                f"a value below background_level={self.background_level}",
+                f"a value different from background_level={self.background_level}",
                 self.circle_level,
             )
         # Neighbouring circles (one column apart) are D_centers / sqrt(2) apart.
@@ -102,6 +122,19 @@ class CircleBoard:
         extent = np.abs(self.object_points[:, :2]).max(axis=0) + 0.5 * self.circle_diameter_m
         if extent[0] > half_w or extent[1] > half_h:
             raise InputError("plane_size_m", "a plane that holds every circle", self.plane_size_m)
+
+    #: Kind of board, as written in :meth:`to_dict`.
+    TYPE = "asymmetric_circles"
+
+    @property
+    def light_features(self) -> bool:
+        """True for a white-on-black board (circles lighter than the background)."""
+        return self.circle_level > self.background_level
+
+    @property
+    def spacing_m(self) -> float:
+        """Distance between neighbouring circles of one column (D_centers^sim), metres."""
+        return self.center_distance_m
 
     # -- the paper's scale equations -------------------------------------------------------
     @property
@@ -237,7 +270,7 @@ class CircleBoard:
     def to_dict(self) -> dict:
         """Plain description (JSON-ready), with the derived scene sizes in metres."""
         return {
-            "type": "asymmetric_circles",
+            "type": self.TYPE,
             "rows": self.rows,
             "cols": self.cols,
             "circle_diameter_mm": self.circle_diameter_mm,
@@ -246,6 +279,7 @@ class CircleBoard:
             "plane_size_m": list(self.plane_size_m),
             "circle_level": self.circle_level,
             "background_level": self.background_level,
+            "white_on_black": self.light_features,
             "scale": self.scale,
             "circle_diameter_m": self.circle_diameter_m,
             "center_distance_m": self.center_distance_m,
@@ -270,21 +304,288 @@ class CircleBoard:
             raise InputError("board", "a board description", data) from error
 
 
-def board_from_spec(
-    spec: str | CircleBoard, plane_size_m: tuple[float, float] | None = None
-) -> CircleBoard:
-    """Build a board from ``"ROWSxCOLS"`` (e.g. ``"4x7"``) or return a given board.
+@dataclass(frozen=True)
+class CheckerBoard:
+    """A checkerboard printed on a rectangular plane (OpenCV's ``findChessboardCornersSB``).
 
-    The printed pattern keeps the default proportions (D_circle = D_centers / 2, border =
-    D_centers / 2); the paper's scale equations then fit it onto the plane
-    (default 0.2 m x 0.2 m, which keeps every paper pose inside the common field of the
-    default rig).
+    Parameters
+    ----------
+    rows, cols : inner corners along the board's y and x axes (>= 2 each, ``rows + cols``
+        odd so the board is not symmetric under a half turn).
+    square_mm : side of a square, millimetres (printed size: no scale equation applies).
+    border_mm : light margin around the squares, millimetres (OpenCV's detector needs one).
+    plane_size_m : (width, height) of the plane, metres; default: the squares plus the
+        border, ``((cols + 1) s + 2 b, (rows + 1) s + 2 b)``.
+    dark_level, light_level : texture values (albedo factors in [0, 1]) of the dark squares
+        and of the light squares and border. Dark grey (0.25) keeps the fringes decodable
+        on the dark squares, as for the circle boards.
     """
-    if isinstance(spec, CircleBoard):
+
+    rows: int = 6
+    cols: int = 9
+    square_mm: float = 20.0
+    border_mm: float = 20.0
+    plane_size_m: tuple[float, float] | None = None
+    dark_level: float = 0.25
+    light_level: float = 1.0
+
+    #: Kind of board, as written in :meth:`to_dict`.
+    TYPE = "checkerboard"
+
+    def __post_init__(self) -> None:
+        positive_int("rows", self.rows, 2)
+        positive_int("cols", self.cols, 2)
+        if (self.rows + self.cols) % 2 == 0:
+            raise InputError(
+                "rows, cols",
+                "inner corner counts with an odd sum (e.g. 6x9), so the board's orientation "
+                "is unambiguous",
+                f"{self.rows}x{self.cols}",
+            )
+        positive("square_mm", self.square_mm)
+        if self.border_mm < 0:
+            raise InputError("border_mm", "a number >= 0 (mm)", self.border_mm)
+        squares = np.array([self.cols + 1, self.rows + 1]) * self.square_mm * MM
+        minimum = squares + 2 * self.border_mm * MM
+        size = minimum if self.plane_size_m is None else self.plane_size_m
+        size = as_float_array("plane_size_m", size, (2,))
+        if (size < squares - 1e-12).any():
+            raise InputError(
+                "plane_size_m", f"a plane that holds the squares ({squares.tolist()} m)", size
+            )
+        object.__setattr__(self, "plane_size_m", (float(size[0]), float(size[1])))
+        for name in ("dark_level", "light_level"):
+            value = getattr(self, name)
+            if not 0.0 <= value <= 1.0:
+                raise InputError(name, "a value in [0, 1]", value)
+        if self.dark_level >= self.light_level:
+            raise InputError(
+                "dark_level", f"a value below light_level={self.light_level}", self.dark_level
+            )
+
+    @property
+    def square_m(self) -> float:
+        """Side of a square, metres."""
+        return self.square_mm * MM
+
+    @property
+    def spacing_m(self) -> float:
+        """Distance between neighbouring corners (one square), metres."""
+        return self.square_m
+
+    @property
+    def center_distance_m(self) -> float:
+        """Neighbourhood scale of the projector's local homographies, metres: two squares,
+        so :mod:`virtus.calib.projector` fits each corner's homography on a disc one square
+        in radius (its four squares)."""
+        return 2.0 * self.square_m
+
+    @property
+    def n_points(self) -> int:
+        """Number of inner corners, rows * cols."""
+        return self.rows * self.cols
+
+    @property
+    def pattern_shape(self) -> tuple[int, int]:
+        """``patternSize`` for ``cv2.findChessboardCornersSB``: (corners per row, rows)."""
+        return (self.cols, self.rows)
+
+    @property
+    def object_points(self) -> np.ndarray:
+        """Inner corners, (rows * cols, 3) float64, metres, board frame, z = 0; row by row
+        (along +y), each row along +x: index ``r * cols + c``."""
+        r, c = np.meshgrid(np.arange(self.rows), np.arange(self.cols), indexing="ij")
+        x = (c.ravel() - 0.5 * (self.cols - 1)) * self.square_m
+        y = (r.ravel() - 0.5 * (self.rows - 1)) * self.square_m
+        return np.stack([x, y, np.zeros(x.size)], axis=1)
+
+    @property
+    def plane_corners(self) -> np.ndarray:
+        """Corners of the plane, (4, 3) float64, metres, board frame (z = 0)."""
+        w, h = 0.5 * np.asarray(self.plane_size_m)
+        return np.array([[-w, -h, 0.0], [w, -h, 0.0], [w, h, 0.0], [-w, h, 0.0]])
+
+    def square_centres(self) -> np.ndarray:
+        """Centres of the squares, ((rows + 1) * (cols + 1), 2) float64, metres, board frame,
+        row by row, and whether each is dark (bool array of the same length)."""
+        r, c = np.meshgrid(np.arange(self.rows + 1), np.arange(self.cols + 1), indexing="ij")
+        x = (c.ravel() - 0.5 * self.cols) * self.square_m
+        y = (r.ravel() - 0.5 * self.rows) * self.square_m
+        return np.stack([x, y], axis=1), (r.ravel() + c.ravel()) % 2 == 0
+
+    def texture(
+        self, pixel_size_m: float = 1e-4, supersample: int = 4, blur_m: float = 0.0
+    ) -> np.ndarray:
+        """Draw the board as an albedo texture covering the whole plane.
+
+        Each texel holds the exact area fraction of dark squares it covers (box filter; the
+        squares are axis-aligned, so the fraction is separable per axis), optionally
+        softened by a Gaussian of ``blur_m`` (m); ``supersample`` is accepted for the circle
+        boards' signature and not needed here. Layout as :meth:`CircleBoard.texture`:
+        (H, W) float32 in [0, 1], rows along +y, columns along +x, centred on the origin.
+        """
+        pixel = positive("pixel_size_m", pixel_size_m)
+        positive_int("supersample", supersample)
+        width_m, height_m = self.plane_size_m
+        width = int(np.ceil(width_m / pixel))
+        height = int(np.ceil(height_m / pixel))
+        s = self.square_m
+        fx = _cell_fractions(width, width_m, self.cols + 1, s)
+        fy = _cell_fractions(height, height_m, self.rows + 1, s)
+        # dark squares: even + even or odd + odd cell indices
+        coverage = np.outer(fy[0], fx[0]) + np.outer(fy[1], fx[1])
+        if blur_m < 0:
+            raise InputError("blur_m", "a standard deviation >= 0 (m)", blur_m)
+        if blur_m > 0:
+            import cv2
+
+            coverage = cv2.GaussianBlur(
+                coverage,
+                (0, 0),
+                sigmaX=blur_m / (width_m / width),
+                sigmaY=blur_m / (height_m / height),
+                borderType=cv2.BORDER_REPLICATE,
+            )
+        levels = self.light_level + (self.dark_level - self.light_level) * coverage
+        return levels.astype(np.float32)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain description (JSON-ready)."""
+        return {
+            "type": self.TYPE,
+            "rows": self.rows,
+            "cols": self.cols,
+            "square_mm": self.square_mm,
+            "border_mm": self.border_mm,
+            "plane_size_m": list(self.plane_size_m),  # type: ignore[arg-type]
+            "dark_level": self.dark_level,
+            "light_level": self.light_level,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict) -> CheckerBoard:
+        """Inverse of :meth:`to_dict`."""
+        keys = ("rows", "cols", "square_mm", "border_mm", "plane_size_m", "dark_level")
+        keys += ("light_level",)
+        try:
+            return cls(**{k: data[k] for k in keys if k in data})
+        except TypeError as error:
+            raise InputError("board", "a checkerboard description", data) from error
+
+
+#: Any calibration board.
+Board = CircleBoard | CheckerBoard
+
+
+def _cell_fractions(texels: int, length_m: float, cells: int, cell_m: float) -> np.ndarray:
+    """Fractions of each texel (of ``texels`` spanning ``length_m``, centred on 0) covered by
+    the even and the odd ones of ``cells`` cells of ``cell_m`` centred on 0: (2, texels)."""
+    edges = (np.arange(texels + 1) / texels - 0.5) * length_m
+    start = -0.5 * cells * cell_m
+    out = np.zeros((2, texels))
+    for k in range(cells):
+        lo, hi = start + k * cell_m, start + (k + 1) * cell_m
+        covered = np.clip(np.minimum(edges[1:], hi) - np.maximum(edges[:-1], lo), 0.0, None)
+        out[k % 2] += covered / np.diff(edges)
+    return out
+
+
+def board_from_dict(data: dict) -> Board:
+    """A board from its :meth:`to_dict` (``type`` picks the class; circles by default)."""
+    if not isinstance(data, dict):
+        raise InputError("board", "a board description (an object)", data)
+    kind = data.get("type", CircleBoard.TYPE)
+    if kind == CircleBoard.TYPE:
+        return CircleBoard.from_dict(data)
+    if kind == CheckerBoard.TYPE:
+        return CheckerBoard.from_dict(data)
+    raise InputError("board.type", f"{CircleBoard.TYPE!r} or {CheckerBoard.TYPE!r}", kind)
+
+
+_SPEC_FORMS = (
+    "'ROWSxCOLS' (the paper's circle boards, e.g. '7x13'), "
+    "'circles:ROWSxCOLS,spacing_mm=S,diameter_mm=D[,border_mm=B][,white_on_black]', "
+    "'checker:ROWSxCOLS,square_mm=S[,border_mm=B]' or a board .json/.yaml file"
+)
+
+
+def board_from_spec(
+    spec: str | Path | Board, plane_size_m: tuple[float, float] | None = None
+) -> Board:
+    """Build a board from a spec (module docstring) or return a given board.
+
+    ``"ROWSxCOLS"`` (e.g. ``"4x7"``) is the paper's circle board: the printed pattern keeps
+    the default proportions (D_circle = D_centers / 2, border = D_centers / 2) and the
+    paper's scale equations fit it onto the plane (default 0.2 m x 0.2 m, which keeps every
+    paper pose inside the common field of the default rig). ``circles:`` and ``checker:``
+    describe printed boards at their true size (millimetres, S = 1; the plane is the
+    pattern with its border unless ``plane_size_m`` is given).
+    """
+    if isinstance(spec, CircleBoard | CheckerBoard):
         return spec
-    match = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", str(spec))
+    text = str(spec).strip()
+    if Path(text).suffix.lower() in (".json", ".yaml", ".yml"):
+        from virtus.safeio import read_json, read_yaml
+
+        path = Path(text)
+        if path.suffix.lower() == ".json":
+            data = read_json(path, "board", expect=dict)
+        else:
+            data = read_yaml(path, "board", expect=dict)
+        return board_from_dict(data)
+    match = re.fullmatch(r"(\d+)\s*[xX]\s*(\d+)", text)
+    if match is not None:
+        rows, cols = int(match.group(1)), int(match.group(2))
+        size = (0.2, 0.2) if plane_size_m is None else plane_size_m
+        return CircleBoard(rows=rows, cols=cols, plane_size_m=size)
+    match = re.fullmatch(r"(circles|checker):\s*(\d+)\s*[xX]\s*(\d+)((?:\s*,[^,]*)*)", text)
     if match is None:
-        raise InputError("board", "'ROWSxCOLS', e.g. '4x7'", spec)
-    rows, cols = int(match.group(1)), int(match.group(2))
-    size = (0.2, 0.2) if plane_size_m is None else plane_size_m
-    return CircleBoard(rows=rows, cols=cols, plane_size_m=size)
+        raise InputError("board", _SPEC_FORMS, spec)
+    kind, rows, cols = match.group(1), int(match.group(2)), int(match.group(3))
+    options: dict[str, Any] = {}
+    for item in filter(None, (part.strip() for part in match.group(4).split(","))):
+        key, _, value = item.partition("=")
+        key = key.strip().replace("-", "_")
+        if not value:
+            options[key] = True
+            continue
+        try:
+            options[key] = float(value)
+        except ValueError:
+            raise InputError(f"board {key}", "a number (millimetres)", value) from None
+    allowed = (
+        {"spacing_mm", "diameter_mm", "border_mm", "white_on_black"}
+        if kind == "circles"
+        else {"square_mm", "border_mm"}
+    )
+    unknown = sorted(set(options) - allowed)
+    if unknown:
+        raise InputError("board", f"options among {sorted(allowed)}", unknown)
+    if kind == "checker":
+        if "square_mm" not in options:
+            raise InputError("board square_mm", "the square size in mm (no default)", None)
+        return CheckerBoard(
+            rows=rows,
+            cols=cols,
+            square_mm=options["square_mm"],
+            border_mm=options.get("border_mm", 20.0),
+            plane_size_m=plane_size_m,
+        )
+    missing = [key for key in ("spacing_mm", "diameter_mm") if key not in options]
+    if missing:
+        raise InputError("board", "spacing_mm and diameter_mm (no defaults)", f"missing {missing}")
+    spacing, diameter = options["spacing_mm"], options["diameter_mm"]
+    border = options.get("border_mm", spacing / 2)
+    w = (2 * border + (cols - 1) * spacing / 2 + diameter) * MM
+    h = (2 * border + (rows - 1) * spacing + diameter + spacing / 2) * MM
+    levels = (1.0, 0.25) if options.get("white_on_black") else (0.25, 1.0)
+    return CircleBoard(
+        rows=rows,
+        cols=cols,
+        circle_diameter_mm=diameter,
+        center_distance_mm=spacing,
+        border_mm=border,
+        plane_size_m=(w, h) if plane_size_m is None else plane_size_m,
+        circle_level=levels[0],
+        background_level=levels[1],
+    )

@@ -5,10 +5,11 @@ Pipeline (:func:`calibrate_observations`):
 1. Camera: Zhang's method (``cv2.calibrateCamera``) on the refined circle centroids, with
    k1, k2, p1, p2 estimated and k3 fixed at 0 (a user does not know the true lens; the
    truth comparison shows how close the estimate gets).
-2. Perspective bias: the area centroid of a circle's image is not the image of its centre.
-   With the calibrated camera and each pose's board pose, the bias is computed exactly
-   (centroid of the projected, distorted outline minus the projected centre), subtracted
-   from the centroids, and the camera recalibrated (:data:`BIAS_ITERATIONS` passes).
+2. Perspective bias (circle boards; checkerboard corners have none): the area centroid
+   of a circle's image is not the image of its centre. With the calibrated camera and each
+   pose's board pose, the bias is computed exactly (centroid of the projected, distorted
+   outline minus the projected centre), subtracted from the centroids, and the camera
+   recalibrated (:data:`BIAS_ITERATIONS` passes).
 3. Projector: each circle's local camera->projector homography is evaluated at its
    corrected camera centre, and the projector calibrated like a camera.
 4. Stereo: ``cv2.stereoCalibrate`` refines both devices and their relative pose jointly.
@@ -30,7 +31,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from virtus.calib.board import CircleBoard
+from virtus.calib.board import Board, CircleBoard
 from virtus.calib.projector import apply_homographies
 from virtus.devices import Camera, Projector, Rig
 from virtus.errors import VirtusError
@@ -100,7 +101,9 @@ class DeviceCalibration:
 
 @dataclass
 class StereoCalibration:
-    """The solved rig plus its errors."""
+    """The solved rig plus its errors; ``board2cam``: the board poses of the joint
+    refinement (consistent with ``rig``), in ``used_poses`` order; ``per_pose[k]["board2cam"]``
+    holds the same."""
 
     rig: Rig
     camera: DeviceCalibration
@@ -109,6 +112,7 @@ class StereoCalibration:
     per_pose: list[dict]
     used_poses: list[str]
     dropped_poses: dict[str, str] = field(default_factory=dict)
+    board2cam: list[Pose] = field(default_factory=list)
 
     @property
     def rms_px(self) -> dict[str, float]:
@@ -176,7 +180,7 @@ def _stereo(
     camera: DeviceCalibration,
     projector: DeviceCalibration,
     fix_intrinsics: bool,
-) -> tuple[Intrinsics, Intrinsics, Pose, float, np.ndarray]:
+) -> tuple[Intrinsics, Intrinsics, Pose, float, np.ndarray, list[Pose]]:
     cam_k, cam_d = camera.intrinsics.to_opencv()
     proj_k, proj_d = projector.intrinsics.to_opencv()
     flags = (
@@ -199,7 +203,8 @@ def _stereo(
         criteria=_CRITERIA,
     )
     rms, k1, d1, k2, d2, R, T = result[:7]  # noqa: N806
-    per_view = result[-1]
+    rvecs, tvecs, per_view = result[9:12]
+    board2cam = [Pose.from_rotvec(r.ravel(), t.ravel()) for r, t in zip(rvecs, tvecs, strict=True)]
     cam = Intrinsics.from_opencv(
         k1, d1.ravel()[:5], camera.intrinsics.width, camera.intrinsics.height
     )
@@ -207,11 +212,12 @@ def _stereo(
         k2, d2.ravel()[:5], projector.intrinsics.width, projector.intrinsics.height
     )
     cam2proj = Pose(R, T.ravel())
-    return cam, proj, cam2proj.inverse(), float(rms), np.asarray(per_view).reshape(-1, 2)
+    per_view = np.asarray(per_view).reshape(-1, 2)
+    return cam, proj, cam2proj.inverse(), float(rms), per_view, board2cam
 
 
 def _solve(
-    board: CircleBoard,
+    board: Board,
     observations: list[PoseObservation],
     camera_size: tuple[int, int],
     projector_size: tuple[int, int],
@@ -221,7 +227,8 @@ def _solve(
     raw = [o.cam_centroids for o in observations]
     cam_points = list(raw)
     camera = calibrate_device(obj, cam_points, camera_size)
-    for _ in range(BIAS_ITERATIONS):
+    # Only the circles' area centroids are biased; checkerboard corners are points.
+    for _ in range(BIAS_ITERATIONS if isinstance(board, CircleBoard) else 0):
         cam_points = [
             r - centroid_bias(camera.intrinsics, board, pose)
             for r, pose in zip(raw, camera.board2device, strict=True)
@@ -231,7 +238,7 @@ def _solve(
         apply_homographies(o.homographies, c) for o, c in zip(observations, cam_points, strict=True)
     ]
     projector = calibrate_device(obj, proj_points, projector_size)
-    cam_i, proj_i, proj2cam, rms, per_view = _stereo(
+    cam_i, proj_i, proj2cam, rms, per_view, board2cam = _stereo(
         obj, cam_points, proj_points, camera, projector, fix_intrinsics
     )
     rig = Rig(Camera(cam_i), Projector(proj_i), proj2cam)
@@ -242,15 +249,16 @@ def _solve(
             "projector_rms_px": float(projector.per_pose_rms_px[k]),
             "stereo_camera_rms_px": float(per_view[k, 0]),
             "stereo_projector_rms_px": float(per_view[k, 1]),
-            "board2cam": camera.board2device[k].to_dict(),
+            "board2cam": board2cam[k].to_dict(),
         }
         for k, o in enumerate(observations)
     ]
-    return StereoCalibration(rig, camera, projector, rms, per_pose, [o.name for o in observations])
+    names = [o.name for o in observations]
+    return StereoCalibration(rig, camera, projector, rms, per_pose, names, {}, board2cam)
 
 
 def calibrate_observations(
-    board: CircleBoard,
+    board: Board,
     observations: list[PoseObservation],
     camera_size: tuple[int, int],
     projector_size: tuple[int, int],
@@ -261,7 +269,7 @@ def calibrate_observations(
 
     Parameters
     ----------
-    board : the board whose :attr:`~CircleBoard.object_points` were observed.
+    board : the board (circles or checkerboard) whose ``object_points`` were observed.
     observations : one per pose; unusable ones are dropped with a warning naming them.
     camera_size, projector_size : (width, height) px.
     fix_intrinsics : keep the single-device intrinsics in the stereo step

@@ -1,5 +1,6 @@
-"""``virtus calibrate``: capture a circle board in many poses, calibrate, compare with the truth
-(the job is :func:`virtus.pipeline.calibrate.calibrate_rig`)."""
+"""``virtus calibrate``: capture a board in many poses, calibrate, compare with the truth
+(:func:`virtus.pipeline.calibrate.calibrate_rig`); with ``--captures DIR [DIR ...]``,
+calibrate a real rig from its captures (:func:`virtus.pipeline.calibrate.calibrate_captures`)."""
 
 from __future__ import annotations
 
@@ -22,6 +23,11 @@ from virtus.cli.options import (
 )
 
 DEFAULT_OUT = Path("virtus-calibration")
+BOARD_HELP = (
+    "Board: ROWSxCOLS (the paper's circle boards 4x7, 5x9, 7x13), "
+    "'circles:ROWSxCOLS,spacing_mm=S,diameter_mm=D[,border_mm=B][,white_on_black]', "
+    "'checker:ROWSxCOLS,square_mm=S[,border_mm=B]' (inner corners) or a board .json/.yaml."
+)
 
 
 def register(app: typer.Typer) -> None:
@@ -30,9 +36,19 @@ def register(app: typer.Typer) -> None:
         out: Annotated[Path, typer.Option(help="Output directory.")] = DEFAULT_OUT,
         rig: RigOption = None,
         sequence: SequenceOption = None,
-        board: Annotated[str, typer.Option(help="Circle board ROWSxCOLS (4x7, 5x9, 7x13).")] = (
-            "7x13"
-        ),
+        board: Annotated[str, typer.Option(help=BOARD_HELP)] = "7x13",
+        captures: Annotated[
+            list[Path] | None,
+            typer.Option(
+                "--captures",
+                help="Calibrate from these captures instead of rendering: capture directories "
+                "(one per board pose, `virtus import`) or folders of them; more may follow "
+                "as arguments (--captures DIR [DIR ...]).",
+            ),
+        ] = None,
+        more_captures: Annotated[
+            list[Path] | None, typer.Argument(help="More capture directories (with --captures).")
+        ] = None,
         poses: Annotated[
             str, typer.Option(help="'paper' (18 poses) or 'random:N' (3 <= N <= 200).")
         ] = "paper",
@@ -63,17 +79,32 @@ def register(app: typer.Typer) -> None:
         from rich.console import Console
         from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-        from virtus.pipeline.calibrate import CALIBRATION_FILE, calibrate_rig, check_pose_spec
+        from virtus.calib.board import board_from_spec
+        from virtus.errors import InputError
+        from virtus.pipeline.calibrate import (
+            CALIBRATION_FILE,
+            calibrate_captures,
+            calibrate_rig,
+            capture_dirs,
+            check_pose_spec,
+        )
         from virtus.sensor import as_seed
 
         # Cheap checks first: nothing is read, rendered or written before they pass.
-        poses = check_pose_spec(poses)
-        seed = as_seed(seed)
-        scanner = build_scanner(
-            rig=rig, sequence=sequence, lookup=lookup, projector=projector, spp=spp,
-            bit_depth=bit_depth,
-            sensor=sensor, variant=variant,
-        )  # fmt: skip
+        the_board = board_from_spec(board)
+        if more_captures and not captures:
+            raise InputError(
+                "arguments", "capture directories only after --captures", more_captures
+            )
+        from_captures = capture_dirs([*captures, *(more_captures or [])]) if captures else None
+        if from_captures is None:
+            poses = check_pose_spec(poses)
+            seed = as_seed(seed)
+            scanner = build_scanner(
+                rig=rig, sequence=sequence, lookup=lookup, projector=projector, spp=spp,
+                bit_depth=bit_depth,
+                sensor=sensor, variant=variant,
+            )  # fmt: skip
         console = Console()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -90,16 +121,27 @@ def register(app: typer.Typer) -> None:
                 def progress(done: int, total: int, name: str) -> None:
                     bar.update(task, completed=done, total=total, description=name)
 
-                result = calibrate_rig(
-                    scanner,
-                    board=board,
-                    poses=poses,
-                    rng=seed,
-                    progress=progress,
-                    out_dir=out,
-                    resume=resume,
-                    overwrite=overwrite,
-                )
+                if from_captures is not None:
+                    if resume:
+                        raise InputError("--resume", "a rendered run (not --captures)", True)
+                    result = calibrate_captures(
+                        from_captures,
+                        board=the_board,
+                        progress=progress,
+                        out_dir=out,
+                        overwrite=overwrite,
+                    )
+                else:
+                    result = calibrate_rig(
+                        scanner,
+                        board=the_board,
+                        poses=poses,
+                        rng=seed,
+                        progress=progress,
+                        out_dir=out,
+                        resume=resume,
+                        overwrite=overwrite,
+                    )
         for warning in caught:
             console.print(f"[yellow]warning:[/yellow] {warning.message}")
         _print_summary(console, result.to_dict())
@@ -119,8 +161,18 @@ def _print_summary(console: Any, data: dict[str, Any]) -> None:
         ref = paper.get(key)
         table.add_row(key, f"{rms[key]:.4f}", "-" if ref is None else f"{ref:.3f}")
     console.print(table)
+    per_pose = Table(title="per pose (RMS, px)")
+    for column in ("pose", "camera", "projector"):
+        per_pose.add_column(column, justify="right")
+    for item in data["per_pose"]:
+        per_pose.add_row(
+            item["name"], f"{item['camera_rms_px']:.4f}", f"{item['projector_rms_px']:.4f}"
+        )
+    console.print(per_pose)
     truth = data.get("truth_error")
     if truth is None:
+        if data["dropped_poses"]:
+            console.print(f"dropped poses: {', '.join(data['dropped_poses'])}")
         return
     table = Table(title="calibrated - true")
     for column in ("device", "fx %", "fy %", "cx px", "cy px", "k1, k2, p1, p2"):

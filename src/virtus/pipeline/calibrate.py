@@ -1,8 +1,16 @@
-"""The calibration job: render a circle board in many poses with a scanner, calibrate it back.
+"""The calibration job: render a board in many poses with a scanner and calibrate it back,
+or calibrate a real rig from its captures.
 
-:func:`calibrate_rig` is the library function behind ``virtus calibrate``:
+:func:`calibrate_rig` is the library function behind ``virtus calibrate``;
+:func:`calibrate_captures` behind ``virtus calibrate --captures``, which runs the same
+detection (:func:`observe_pose`) and solver on captures made anywhere (a real bench through
+:func:`virtus.capture.import_capture`, or rendered), one capture of the whole sequence per
+board pose, and writes the same result files (no truth comparison: the truth is unknown).
 
-1. The board (:class:`~virtus.calib.board.CircleBoard`) becomes a textured plane; the poses
+Rendered calibration:
+
+1. The board (:class:`~virtus.calib.board.CircleBoard` or
+   :class:`~virtus.calib.board.CheckerBoard`) becomes a textured plane; the poses
    (the paper's 18, ``random:N`` or a list) are checked against both fields.
 2. Each pose is captured with the scanner (its rig is the truth; its sequence, projector
    model, sensor and spp are used as they are), with a capture seed derived from the
@@ -60,8 +68,8 @@ from typing import Any
 import numpy as np
 
 from virtus import paper
-from virtus.calib.board import CircleBoard, board_from_spec
-from virtus.calib.detect import find_grid, refine_centres
+from virtus.calib.board import Board, CheckerBoard, board_from_dict, board_from_spec
+from virtus.calib.detect import find_grid, refine_points
 from virtus.calib.io import PAPER_TXT_FILES, save_opencv_yaml, save_paper_txt
 from virtus.calib.poses import BoardPose, check_pose, pose_set
 from virtus.calib.projector import local_homographies
@@ -88,6 +96,10 @@ PAPER_RMS_PX = paper.RMS_PX
 #: defocus: with 4 spp the centroid error falls from ~0.005 px to ~0.001 px (measured on
 #: exact synthetic images); a symmetric blur leaves every circle's centroid in place.
 BOARD_BLUR_M = 2e-4
+#: Softening (m) of a checkerboard's square edges: a saddle fit needs the X-junction spread
+#: over a few pixels (measured corner error 0.05 px RMS at 2e-4 m, 0.01 px at 1e-3 m with
+#: 1.75 mm pixels on the board); corners stay at the crossings (point symmetry).
+CHECKER_BLUR_M = 1e-3
 #: Texel size (m) of the board texture: about a quarter of a camera pixel at 0.9 m.
 BOARD_TEXEL_M = 1e-4
 #: Most poses of ``random:N`` (each pose is a full capture: 200 are ~10,000 frames).
@@ -129,7 +141,8 @@ class CalibrationResult:
     rig : the calibrated rig.
     rms_px : RMS reprojection error (px): ``camera``, ``projector`` (single-device
         calibrations, bias-corrected points) and ``stereo`` (joint refinement, both devices).
-    per_pose : per used pose: name, RMS per device, calibrated ``board2cam``.
+    per_pose : per used pose: name, RMS per device, calibrated ``board2cam`` (from the
+        joint refinement, consistent with ``rig``).
     truth_error : :func:`virtus.calib.truth.truth_error` against the true rig (or None).
     board : the board.
     poses : every pose that was captured (including dropped ones).
@@ -144,7 +157,7 @@ class CalibrationResult:
     rms_px: dict[str, float]
     per_pose: list[dict[str, Any]]
     truth_error: dict[str, Any] | None
-    board: CircleBoard
+    board: Board
     poses: list[BoardPose]
     dropped_poses: dict[str, str] = field(default_factory=dict)
     settings: dict[str, Any] = field(default_factory=dict)
@@ -194,7 +207,7 @@ class CalibrationResult:
 # -- one pose -------------------------------------------------------------------------------
 
 
-def board_scene(board: CircleBoard, pose: BoardPose, texture: np.ndarray) -> Any:
+def board_scene(board: Board, pose: BoardPose, texture: np.ndarray) -> Any:
     """The scene of one pose: the board as a textured plane (world = camera frame)."""
     from virtus.scene import Scene, TexturedPlaneObject
 
@@ -213,8 +226,8 @@ def check_sequence(sequence: Any) -> None:
         )
 
 
-def observe_pose(capture: Capture, board: CircleBoard, name: str) -> PoseObservation:
-    """Detect the circles and fit the projector homographies from one pose's capture.
+def observe_pose(capture: Capture, board: Board, name: str) -> PoseObservation:
+    """Detect the board and fit the projector homographies from one pose's capture.
 
     Parameters
     ----------
@@ -239,7 +252,7 @@ def observe_pose(capture: Capture, board: CircleBoard, name: str) -> PoseObserva
     centres = find_grid(detect_on, board)
     if centres is None:
         return PoseObservation(name, None, None)
-    centroids = refine_centres(uniform, board, centres)
+    centroids = refine_points(uniform, board, centres)
     homographies = local_homographies(decoded.proj_uv, board, centres)
     return PoseObservation(name, centroids, homographies)
 
@@ -308,7 +321,7 @@ def check_pose_spec(spec: str) -> str:
 
 
 def _pose_list(
-    poses: str | list[BoardPose], rig: Rig, board: CircleBoard, seed: int, check: bool
+    poses: str | list[BoardPose], rig: Rig, board: Board, seed: int, check: bool
 ) -> list[BoardPose]:
     if isinstance(poses, str):
         return pose_set(poses, rig, board, np.random.default_rng(seed))
@@ -328,7 +341,7 @@ def _pose_list(
 
 def _episode(
     scanner: Scanner,
-    board: CircleBoard,
+    board: Board,
     pose_list: list[BoardPose],
     poses: str | list[BoardPose],
     seed: int,
@@ -404,7 +417,7 @@ def check_pose_spread(poses: list[BoardPose]) -> None:
 
 def _solve(
     episode: dict[str, Any],
-    board: CircleBoard,
+    board: Board,
     pose_list: list[BoardPose],
     observations: list[PoseObservation],
     timing: dict[str, float],
@@ -439,7 +452,7 @@ def _solve(
 def calibrate_rig(
     scanner: Scanner,
     *,
-    board: str | CircleBoard = "7x13",
+    board: str | Board = "7x13",
     poses: str | list[BoardPose] = "paper",
     rng: np.random.Generator | int | None = None,
     progress: Progress | None = None,
@@ -455,7 +468,8 @@ def calibrate_rig(
     ----------
     scanner : the virtual scanner; its rig is the truth, its sequence (phase frames in both
         directions), projector model, sensor and spp make the captures.
-    board : a :class:`CircleBoard` or ``"ROWSxCOLS"`` (paper: 4x7, 5x9, 7x13).
+    board : a board or a spec for :func:`~virtus.calib.board.board_from_spec` (``"7x13"``,
+        ``"checker:6x9,square_mm=20"``, ...).
     poses : ``"paper"``, ``"random:N"`` (3 <= N <= :data:`MAX_RANDOM_POSES`) or a list of
         :class:`BoardPose` with unique names.
     rng : the run's seed (int >= 0; ``None`` = 0; a Generator draws one): seeds the random
@@ -512,13 +526,14 @@ def calibrate_rig(
 
 def _run_episode(
     scanner: Scanner,
-    board: CircleBoard,
+    board: Board,
     pose_list: list[BoardPose],
     episode: dict[str, Any],
     progress: Progress | None,
     run: RunDirectory | None,
 ) -> CalibrationResult:
-    texture = board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=BOARD_BLUR_M)
+    blur = CHECKER_BLUR_M if isinstance(board, CheckerBoard) else BOARD_BLUR_M
+    texture = board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=blur)
     digest = config_digest(episode)
     timing = {"render_s": 0.0, "observe_s": 0.0, "calibrate_s": 0.0}
     if run is not None:
@@ -590,7 +605,7 @@ def recalibrate(out_dir: str | Path, *, fix_intrinsics: bool | None = None) -> C
         episode["settings"] = {k: v for k, v in episode["settings"].items() if k != "timing_s"}
         if fix_intrinsics is not None:
             episode["settings"]["fix_intrinsics"] = bool(fix_intrinsics)
-        board = CircleBoard.from_dict(episode["board"])
+        board = board_from_dict(episode["board"])
         seeds = episode.get("pose_seeds") or [None] * len(episode["poses"])
         pose_list, observations = [], []
         for item, seed in zip(episode["poses"], seeds, strict=True):
@@ -607,3 +622,222 @@ def recalibrate(out_dir: str | Path, *, fix_intrinsics: bool | None = None) -> C
         result = _solve(episode, board, pose_list, observations, timing)
         result.save(out_dir)
         return result
+
+
+# -- calibration from captures (real benches) ------------------------------------------------
+
+#: The job's name in ``run.json`` when it calibrates from captures.
+CAPTURES_COMMAND = "calibrate --captures"
+#: ``episode.json`` of a calibration from captures: the captures and the board.
+CAPTURES_LAYOUT = (*RESULT_FILES, EPISODE_FILE, TIMING_FILE, f"{POSE_DIR}/*.npz")
+
+
+def capture_dirs(paths: list[str | Path]) -> list[Path]:
+    """Capture directories from paths that are capture directories (holding
+    ``capture.json``) or folders of them (their capture sub-directories, sorted by name).
+
+    Raises
+    ------
+    InputError : a path that is neither, or no capture at all.
+    """
+    from virtus.capture import MANIFEST
+
+    out: list[Path] = []
+    for item in paths:
+        path = Path(item)
+        if (path / MANIFEST).is_file():
+            out.append(path)
+            continue
+        found = (
+            sorted(p for p in path.iterdir() if (p / MANIFEST).is_file()) if path.is_dir() else []
+        )
+        if not found:
+            raise InputError(
+                "captures",
+                f"capture directories (holding {MANIFEST}) or folders of them",
+                str(path),
+            )
+        out.extend(found)
+    if not out:
+        raise InputError("captures", "at least one capture directory", "none")
+    return out
+
+
+def _check_captures(captures: list[Capture], names: list[str]) -> tuple[tuple[int, int], ...]:
+    """(camera size, projector size) shared by every capture; refuse mixed captures."""
+    first = captures[0]
+    check_sequence(first.sequence)
+    camera = first.rig.camera.intrinsics
+    sizes = ((camera.width, camera.height), (first.sequence.width, first.sequence.height))
+    for capture, name in zip(captures, names, strict=True):
+        cam = capture.rig.camera.intrinsics
+        if capture.sequence != first.sequence:
+            raise InputError(
+                f"capture {name!r}", f"the sequence of capture {names[0]!r}", "another sequence"
+            )
+        if (cam.width, cam.height) != sizes[0]:
+            raise InputError(
+                f"capture {name!r}",
+                f"{sizes[0][0]}x{sizes[0][1]} px images (as {names[0]!r})",
+                f"{cam.width}x{cam.height} px",
+            )
+    return sizes
+
+
+def calibrate_captures(
+    captures: list[str | Path | Capture],
+    *,
+    board: str | Board,
+    out_dir: str | Path | None = None,
+    overwrite: bool = False,
+    fix_intrinsics: bool = False,
+    progress: Progress | None = None,
+) -> CalibrationResult:
+    """Calibrate a rig from captures of a board, one capture of the whole sequence per pose.
+
+    The detection and solve are those of :func:`calibrate_rig` (:func:`observe_pose`,
+    :func:`virtus.calib.solve.calibrate_observations`), so captures of rendered poses give
+    exactly the calibration the rendered job gives. Poses whose board is not found (or not
+    fully decoded) are dropped with a warning naming them.
+
+    Parameters
+    ----------
+    captures : capture directories (:meth:`Capture.load`; a folder of capture directories
+        stands for them, sorted by name) or captures; a pose is named after its directory
+        (``pose_NNN`` for an in-memory capture). Every capture must have the same sequence
+        (phase frames in both directions) and camera size; the projector size is the
+        sequence's. The captures' rigs are not used (the calibration is unknown).
+    board : a board or a spec (:func:`~virtus.calib.board.board_from_spec`).
+    out_dir : if given, the run owns this directory and writes ``calibration.json``,
+        ``calibration.yaml``, ``paper_txt/``, ``episode.json`` (the captures, the board),
+        ``poses/<name>.npz`` (the observations) and ``timing.json``.
+    overwrite : remove an earlier run's files in ``out_dir`` first.
+    fix_intrinsics : keep single-device intrinsics in the stereo step.
+    progress : called after each pose as ``progress(done, total, name)``.
+
+    Returns
+    -------
+    :class:`CalibrationResult` with ``truth_error`` None and ``poses`` the solved board
+    poses (``board2cam``, metres) of the poses used.
+
+    Raises
+    ------
+    InputError : no captures, captures of different sequences or sizes, a sequence without
+        both directions, a bad board spec, a capture that cannot be read.
+    VirtusError : fewer than 3 usable poses (naming the dropped ones), a degenerate pose
+        set, ``out_dir`` in use by another run.
+    """
+    board = board_from_spec(board)
+    loaded: list[Capture] = []
+    names: list[str] = []
+    paths: list[Path | None] = []
+    items: list[Any] = list(captures)
+    if not items:
+        raise InputError("captures", "at least one capture", "none")
+    if all(isinstance(item, str | Path) for item in items):
+        items = capture_dirs(items)
+    for index, item in enumerate(items):
+        capture = item if isinstance(item, Capture) else Capture.load(item)
+        loaded.append(capture)
+        paths.append(capture.path)
+        names.append(capture.path.name if capture.path is not None else f"pose_{index + 1:03d}")
+    if len(set(names)) != len(names):
+        raise InputError("captures", "captures with distinct directory names", names)
+    camera_size, projector_size = _check_captures(loaded, names)
+    episode = {
+        "source": "captures",
+        "captures": [None if p is None else str(p) for p in paths],
+        "names": names,
+        "board": board.to_dict(),
+        "camera_size": list(camera_size),
+        "projector_size": list(projector_size),
+        "sequence": loaded[0].sequence.to_dict(),
+        "fix_intrinsics": bool(fix_intrinsics),
+    }
+    if out_dir is None:
+        return _run_captures(loaded, names, board, episode, progress, None)
+    inputs = {
+        f"capture {name}": Path(path) / "capture.json"
+        for name, path in zip(names, paths, strict=True)
+        if path is not None
+    }
+    with claim_run(
+        out_dir,
+        CAPTURES_COMMAND,
+        episode,
+        inputs=inputs,
+        layout=CAPTURES_LAYOUT,
+        overwrite=overwrite,
+    ) as run:
+        return _run_captures(loaded, names, board, episode, progress, run)
+
+
+def _run_captures(
+    captures: list[Capture],
+    names: list[str],
+    board: Board,
+    episode: dict[str, Any],
+    progress: Progress | None,
+    run: RunDirectory | None,
+) -> CalibrationResult:
+    timing = {"render_s": 0.0, "observe_s": 0.0, "calibrate_s": 0.0}
+    if run is not None:
+        run.own(EPISODE_FILE, *(f"{POSE_DIR}/{n}.npz" for n in names), *RESULT_FILES, TIMING_FILE)
+        run.write_json(EPISODE_FILE, episode)
+    observations = []
+    for index, (capture, name) in enumerate(zip(captures, names, strict=True)):
+        start = time.perf_counter()
+        obs = observe_pose(capture, board, name)
+        timing["observe_s"] += time.perf_counter() - start
+        observations.append(obs)
+        if run is not None:
+            arrays = {
+                key: value
+                for key, value in (
+                    ("cam_centroids", obs.cam_centroids),
+                    ("homographies", obs.homographies),
+                )
+                if value is not None
+            }
+            run.write(f"{POSE_DIR}/{name}.npz", partial(_save_arrays, arrays=arrays))
+            run.log(f"observed {name}")
+        if progress is not None:
+            progress(index + 1, len(captures), name)
+    start = time.perf_counter()
+    with _opencv_single_thread():
+        solved = calibrate_observations(
+            board,
+            observations,
+            tuple(episode["camera_size"]),  # type: ignore[arg-type]
+            tuple(episode["projector_size"]),  # type: ignore[arg-type]
+            fix_intrinsics=episode["fix_intrinsics"],
+        )
+    poses = [
+        BoardPose(p["name"], pose)
+        for p, pose in zip(solved.per_pose, solved.board2cam, strict=True)
+    ]
+    # The true poses are unknown: the solved ones measure the spread (a degenerate set
+    # solves to a wrong focal length, but its boards stay nearly parallel).
+    check_pose_spread(poses)
+    timing["calibrate_s"] = time.perf_counter() - start
+    settings = {k: v for k, v in episode.items() if k in ("source", "captures", "fix_intrinsics")}
+    settings.update(n_poses=len(captures), frames_per_pose=len(captures[0].sequence))
+    result = CalibrationResult(
+        rig=solved.rig,
+        rms_px=solved.rms_px,
+        per_pose=solved.per_pose,
+        truth_error=None,
+        board=board,
+        poses=poses,
+        dropped_poses=solved.dropped_poses,
+        settings=settings,
+        timing_s=timing,
+    )
+    if run is not None:
+        result.save(run.path)
+        run.write_json(TIMING_FILE, _timing_record(timing))
+    return result
+
+
+def _save_arrays(path: Path, arrays: dict[str, np.ndarray]) -> None:
+    np.savez(path, **arrays)

@@ -1,0 +1,271 @@
+"""Digital twins: write a calibrated rig's twin, and measure its fidelity against the real
+captures it was calibrated from.
+
+:func:`write_twin` is ``virtus twin CALIB --out DIR``: ``DIR/rig.json`` (the rig schema),
+``DIR/isaac.json`` (:func:`virtus.twin.twin_parameters`: USD lens and film values in tenths
+of a scene unit, ``metersPerUnit``, Omniverse lens-distortion attributes, the projector's
+RectLight size and both poses in Isaac's world) and, with usd-core, ``DIR/twin.usda``.
+
+:func:`validate_twin` is ``virtus twin CALIB --validate CAPTURES...``: every captured board
+pose is rendered again with the twin -- a :class:`~virtus.scanner.Scanner` built from the
+twin rig and the captures' sequence, resolution and bit depth, the board placed by the
+calibration's own extrinsics (``per_pose[*].board2cam`` of ``calibration.json``, matched by
+pose name; a pose the file lacks is placed by ``cv2.solvePnP`` of its detected points with
+the twin camera) -- and both captures are decoded and compared:
+
+* ``centre_diff_px``: board point (circle centre / corner) positions, real minus virtual,
+  mean and max of the distances, px;
+* ``proj_uv_rms_px`` (and ``proj_uv_median_px``): RMS (median) of the distance between the
+  decoded projector coordinates of the two captures on the board (pixels valid in both,
+  inside the board plane less :data:`BOARD_EDGE_FRACTION`), px;
+* ``cloud_mae_mm``, ``cloud_rmse_mm``: distance from every real point (triangulated with the
+  twin rig) to the nearest virtual point, on the board, mm (the paper's 0.436 mm).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from virtus.calib.board import Board, board_from_dict, board_from_spec
+from virtus.calib.io import load_calibration
+from virtus.calib.poses import BoardPose
+from virtus.capture import Capture
+from virtus.devices import Rig
+from virtus.errors import InputError, VirtusError
+from virtus.jsonio import write_json
+from virtus.pipeline.calibrate import (
+    BOARD_BLUR_M,
+    BOARD_TEXEL_M,
+    CHECKER_BLUR_M,
+    board_scene,
+    capture_dirs,
+    observe_pose,
+)
+from virtus.reconstruct import points_from_decoded
+from virtus.safeio import read_json
+from virtus.scanner import Scanner
+from virtus.sensor import Sensor
+from virtus.transforms import Pose
+from virtus.twin import DEFAULT_PIXEL_SIZE_M, twin_parameters
+
+#: Border of the board plane (fraction of its size per side) left out of the comparisons:
+#: pixels straddling the board's edge mix board and background and belong to neither.
+BOARD_EDGE_FRACTION = 0.05
+#: The paper's real-to-virtual point-cloud MAE, mm (DESIGN.md section 4).
+PAPER_CLOUD_MAE_MM = 0.436
+#: Files written by :func:`write_twin` and :func:`validate_twin`.
+RIG_FILE, ISAAC_FILE, USD_FILE, VALIDATION_FILE = (
+    "rig.json",
+    "isaac.json",
+    "twin.usda",
+    "validation.json",
+)
+
+
+def write_twin(
+    calibration: str | Path,
+    out_dir: str | Path,
+    *,
+    meters_per_unit: float = 1.0,
+    pixel_size_m: float = DEFAULT_PIXEL_SIZE_M,
+    units: str | None = None,
+) -> dict[str, Path]:
+    """Write the twin of a calibration (module docstring); returns name -> path written.
+
+    ``calibration``: any file :func:`virtus.calib.io.load_calibration` reads (``units`` for
+    files that state none).
+    """
+    rig = load_calibration(calibration, units=units)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written = {"rig": rig.save_json(out / RIG_FILE)}
+    params = twin_parameters(rig, pixel_size_m=pixel_size_m, meters_per_unit=meters_per_unit)
+    params["source"] = str(calibration)
+    written["isaac"] = write_json(out / ISAAC_FILE, params)
+    try:
+        from virtus.usd import export_usd
+
+        written["usd"] = export_usd(
+            out / USD_FILE, rig=rig, meters_per_unit=meters_per_unit, pixel_size_m=pixel_size_m
+        )
+    except VirtusError as error:  # usd-core missing: the JSON files are the twin
+        if "usd-core" not in str(error):
+            raise
+    return written
+
+
+@dataclass
+class TwinValidation:
+    """Per-pose and overall differences between real captures and their twin renders."""
+
+    per_pose: list[dict[str, Any]]
+    overall: dict[str, float]
+    dropped: dict[str, str] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: units, per pose, overall, dropped poses."""
+        return {
+            "units": {"centre": "px", "proj_uv": "projector px", "cloud": "mm"},
+            "per_pose": self.per_pose,
+            "overall": self.overall,
+            "dropped": self.dropped,
+        }
+
+
+def _board_poses(calibration: str | Path) -> tuple[dict[str, Pose], dict[str, Any] | None]:
+    """The calibrated board poses by name and the board of a ``calibration.json`` (else {})."""
+    path = Path(calibration)
+    if path.suffix.lower() != ".json":
+        return {}, None
+    data = read_json(path, "calibration", expect=dict)
+    poses = {
+        str(item["name"]): Pose.from_dict(item["board2cam"], "board2cam")
+        for item in data.get("per_pose", [])
+        if isinstance(item, dict) and "board2cam" in item and "name" in item
+    }
+    return poses, data.get("board")
+
+
+def _pnp(rig: Rig, board: Board, points: np.ndarray) -> Pose:
+    import cv2
+
+    K, dist = rig.camera.intrinsics.to_opencv()  # noqa: N806
+    ok, rvec, tvec = cv2.solvePnP(board.object_points, points, K, dist)
+    if not ok:
+        raise VirtusError("twin validation: could not place the board (solvePnP failed)")
+    return Pose.from_rotvec(rvec.ravel(), tvec.ravel())
+
+
+def _on_board(rig: Rig, board: Board, board2cam: Pose) -> np.ndarray:
+    """(H, W) bool: camera pixels whose ray meets the board plane inside the plane."""
+    intr = rig.camera.intrinsics
+    rays = intr.unproject(intr.pixel_grid().reshape(-1, 2))
+    normal = board2cam.R[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = (board2cam.t @ normal) / (rays @ normal)
+    local = (rays * s[:, None] - board2cam.t) @ board2cam.R
+    half = 0.5 * np.asarray(board.plane_size_m) * (1.0 - BOARD_EDGE_FRACTION)
+    inside = (s > 0) & (np.abs(local[:, 0]) < half[0]) & (np.abs(local[:, 1]) < half[1])
+    return inside.reshape(intr.height, intr.width)
+
+
+def compare_captures(
+    rig: Rig, board: Board, board2cam: Pose, real: Capture, virtual: Capture, name: str
+) -> dict[str, Any]:
+    """Differences between a real capture and its twin render (module docstring)."""
+    from scipy.spatial import cKDTree
+
+    obs_real, obs_virtual = observe_pose(real, board, name), observe_pose(virtual, board, name)
+    row: dict[str, Any] = {"name": name}
+    if obs_real.cam_centroids is not None and obs_virtual.cam_centroids is not None:
+        diff = np.linalg.norm(obs_real.cam_centroids - obs_virtual.cam_centroids, axis=1)
+        row["centre_diff_mean_px"] = float(np.nanmean(diff))
+        row["centre_diff_max_px"] = float(np.nanmax(diff))
+    dec_real, dec_virtual = real.decode(), virtual.decode()
+    both = dec_real.mask & dec_virtual.mask & _on_board(rig, board, board2cam)
+    delta = dec_real.proj_uv[both] - dec_virtual.proj_uv[both]
+    distance_uv = np.sqrt(np.sum(delta**2, axis=1))
+    row["proj_uv_rms_px"] = float(np.sqrt(np.mean(distance_uv**2)))
+    row["proj_uv_median_px"] = float(np.median(distance_uv))
+    row["pixels"] = int(both.sum())
+    cloud_real = points_from_decoded(rig, dec_real.proj_uv, both)[both]
+    cloud_virtual = points_from_decoded(rig, dec_virtual.proj_uv, both)[both]
+    cloud_real = cloud_real[np.isfinite(cloud_real).all(axis=1)]
+    cloud_virtual = cloud_virtual[np.isfinite(cloud_virtual).all(axis=1)]
+    distance, _ = cKDTree(cloud_virtual).query(cloud_real)
+    row["cloud_mae_mm"] = float(1e3 * np.mean(distance))
+    row["cloud_rmse_mm"] = float(1e3 * np.sqrt(np.mean(distance**2)))
+    row["cloud_median_mm"] = float(1e3 * np.median(distance))
+    return row
+
+
+def validate_twin(
+    calibration: str | Path | Rig,
+    captures: list[str | Path | Capture],
+    *,
+    board: str | Board | None = None,
+    spp: int = 1,
+    out: str | Path | None = None,
+    units: str | None = None,
+) -> TwinValidation:
+    """Render every captured pose with the twin and compare (module docstring).
+
+    Parameters
+    ----------
+    calibration : the calibration (a file :func:`load_calibration` reads, or a rig); a
+        ``calibration.json`` also gives the board poses and the board.
+    captures : the real calibration captures (directories, folders of them, or captures).
+    board : the board (default: the calibration file's).
+    spp : supersamples of the twin renders.
+    out : if given, the table is written there as JSON.
+
+    Raises
+    ------
+    InputError : no board known, captures of another size than the calibration's camera.
+    """
+    poses: dict[str, Pose] = {}
+    board_data = None
+    if isinstance(calibration, Rig):
+        rig = calibration
+    else:
+        rig = load_calibration(calibration, units=units)
+        poses, board_data = _board_poses(calibration)
+    if board is None and board_data is None:
+        raise InputError("board", "a board (the calibration file names none)", None)
+    the_board = board_from_spec(board) if board is not None else board_from_dict(board_data)
+    items: list[Any] = list(captures)
+    if items and all(isinstance(item, str | Path) for item in items):
+        items = capture_dirs(items)
+    blur = CHECKER_BLUR_M if the_board.TYPE == "checkerboard" else BOARD_BLUR_M
+    texture = the_board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=blur)
+    per_pose: list[dict[str, Any]] = []
+    dropped: dict[str, str] = {}
+    for index, item in enumerate(items):
+        real = item if isinstance(item, Capture) else Capture.load(item)
+        name = real.path.name if real.path is not None else f"pose_{index + 1:03d}"
+        cam = rig.camera.intrinsics
+        if real.frames.shape[1:] != (cam.height, cam.width):
+            raise InputError(
+                f"capture {name!r}", f"{cam.width}x{cam.height} px frames", real.frames.shape
+            )
+        board2cam = poses.get(name)
+        if board2cam is None:
+            obs = observe_pose(real, the_board, name)
+            if obs.problem() is not None:
+                dropped[name] = obs.problem()  # type: ignore[assignment]
+                continue
+            board2cam = _pnp(rig, the_board, obs.cam_centroids)  # type: ignore[arg-type]
+        scanner = Scanner(
+            rig=rig,
+            sequence=real.sequence,
+            sensor=real.sensor or Sensor().with_(bit_depth=real.bit_depth),
+            spp=spp,
+        )
+        virtual = scanner.capture(board_scene(the_board, BoardPose(name, board2cam), texture))
+        per_pose.append(compare_captures(rig, the_board, board2cam, real, virtual, name))
+    if not per_pose:
+        raise VirtusError("twin validation: no pose could be compared" + f" ({dropped})")
+    weights = np.array([row["pixels"] for row in per_pose], dtype=np.float64)
+    centres = [r.get("centre_diff_mean_px", np.nan) for r in per_pose]
+    overall = {
+        "centre_diff_mean_px": float(np.mean(centres)),
+        "centre_diff_max_px": float(
+            np.max([r.get("centre_diff_max_px", np.nan) for r in per_pose])
+        ),
+        "proj_uv_rms_px": float(
+            np.sqrt(np.average([r["proj_uv_rms_px"] ** 2 for r in per_pose], weights=weights))
+        ),
+        "cloud_mae_mm": float(np.average([r["cloud_mae_mm"] for r in per_pose], weights=weights)),
+        "cloud_rmse_mm": float(
+            np.sqrt(np.average([r["cloud_rmse_mm"] ** 2 for r in per_pose], weights=weights))
+        ),
+        "paper_cloud_mae_mm": PAPER_CLOUD_MAE_MM,
+    }
+    result = TwinValidation(per_pose, overall, dropped)
+    if out is not None:
+        write_json(Path(out), result.to_dict())
+    return result
