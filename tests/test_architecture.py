@@ -16,10 +16,10 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("__init__", "errors", "checks", "jsonio", "safeio", "paper"),
     ("transforms", "optics", "isaac", "devices"),
     ("phase", "patterns", "sensor", "projection", "groundtruth", "images", "ply", "objects"),
-    ("scene", "capture", "reconstruct", "metrology", "calib", "runs"),
+    ("scene", "usd", "twin", "capture", "reconstruct", "metrology", "calib", "runs"),
     ("render",),
     ("scanner",),
-    ("pipeline",),
+    ("pipeline", "data"),
     ("cli", "__main__"),
 )
 #: Third-party packages only the renderer may import.

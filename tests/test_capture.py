@@ -174,3 +174,47 @@ def test_frame_writer_refuses_a_bad_thread_count(tmp_path, workers):
     with pytest.raises(InputError, match=r"^workers: expected an integer >= 1"):
         write_frames(tmp_path, np.zeros((1, 4, 4), np.uint8), workers=workers)
     assert not list(tmp_path.glob("*.png"))
+
+
+def test_a_failed_save_names_the_path_and_leaves_no_partial_capture(
+    tmp_path, captured, monkeypatch
+) -> None:
+    import virtus.capture as capture_module
+
+    def disk_full(directory, frames, **_options):
+        (directory / "000.png").write_bytes(b"half a frame")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(capture_module, "write_frames", disk_full)
+    with pytest.raises(OSError) as info:
+        captured[2].save(tmp_path / "cap")
+    assert str(tmp_path / "cap" / "frames") in str(info.value.filename)
+    assert not [p for p in (tmp_path / "cap").rglob("*") if p.is_file()]
+
+
+def test_write_json_is_atomic_and_names_the_path(tmp_path) -> None:
+    from virtus.jsonio import write_json
+
+    with pytest.raises(OSError) as info:
+        write_json(tmp_path / "missing" / "x.json", {"a": 1})
+    assert info.value.filename == str(tmp_path / "missing" / "x.json")
+    (tmp_path / "x.json").write_text("old")
+    with pytest.raises(TypeError):
+        write_json(tmp_path / "x.json", {"a": object()})
+    assert (tmp_path / "x.json").read_text() == "old"
+    write_json(tmp_path / "x.json", {"a": 1})
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.json"]
+
+
+def test_cli_capture_owns_its_directory(tmp_path, capsys) -> None:
+    rig_path = small_rig().save_json(tmp_path / "rig.json")
+    argv = ["capture", "--rig", str(rig_path), "--spp", "1", "--out", str(tmp_path / "o")]
+    code, _, _ = run_cli(argv, capsys)
+    assert code == 0
+    record = json.loads((tmp_path / "o" / "run.json").read_text())
+    assert record["command"] == "capture" and record["status"] == "complete"
+    assert "frames/000.png" in record["files"] and "points.ply" in record["files"]
+    code, _, stderr = run_cli([*argv, "--seed", "3"], capsys)
+    assert code == 2 and "with other settings (config.seed: 3 here, 0 in the existing" in stderr
+    code, _, _ = run_cli([*argv, "--seed", "3", "--overwrite"], capsys)
+    assert code == 0 and Capture.load(tmp_path / "o").seed == 3

@@ -16,7 +16,7 @@ from tests.test_render_support import cropped_rig, small_rig
 from virtus.calib.io import save_paper_txt
 from virtus.capture import Capture, import_capture
 from virtus.cli import main
-from virtus.errors import InputError
+from virtus.errors import InputError, VirtusError
 from virtus.patterns import default_sequence, load_sequence_file
 from virtus.pipeline.scan import decode_capture, reconstruct_capture
 from virtus.projection import Lookup, ProjectorModel
@@ -166,11 +166,13 @@ def test_decoded_files_are_recomputed_when_the_frames_change(tmp_path, twelve_bi
     rendered.save(directory)
     decode_capture(directory)
     first = reconstruct_capture(directory).points
-    # Replace the frames by black ones: the stale decode must not be reused.
+    # Replace the frames by black ones: the stale decode must not be reused (and a decode
+    # of black frames is an error that says so, not an empty reconstruction).
     for path in sorted((directory / "frames").glob("*.png")):
         cv2.imwrite(str(path), np.zeros(rendered.frames.shape[1:], np.uint16))
-    second = reconstruct_capture(directory).points
-    assert np.isfinite(first).any() and not np.isfinite(second).any()
+    assert np.isfinite(first).any()
+    with pytest.raises(VirtusError, match="every frame is black"):
+        reconstruct_capture(directory)
 
 
 def _bad_import_cases(tmp_path: Path, twelve_bit) -> dict[str, tuple[list, str]]:

@@ -87,8 +87,10 @@ def test_reconstruct_with_a_calibration_file(freeform_scan: Path, tmp_path: Path
     small = default_rig().to_dict()
     small["camera"]["width"] = 480
     (tmp_path / "small.json").write_text(json.dumps(small))
-    with pytest.raises(VirtusError, match="480x960"):
+    # The capture's camera size is given to the reader, which names the difference.
+    with pytest.raises(VirtusError, match=r"camera_size given, \(960, 960\), got \(480, 960\)"):
         reconstruct_capture(freeform_scan, tmp_path / "small.json", tmp_path / "x.ply")
+    assert not (tmp_path / "x.ply").exists()
     # The other calibration formats virtus calibrate writes: OpenCV YAML, the paper's txt.
     from virtus.calib.io import save_opencv_yaml, save_paper_txt
 
@@ -194,3 +196,108 @@ def test_scan_with_a_missing_calibration_fails_before_rendering(tmp_path: Path) 
     with pytest.raises(FileNotFoundError, match="no such calibration file"):
         scan(default_scene(), tmp_path / "out", calibration=tmp_path / "missing.json")
     assert not (tmp_path / "out").exists()  # no capture left behind
+
+
+# --- run ownership, resume, derived files tied to their inputs ---------------------------------
+
+
+#: A cheap scanner for the ownership tests: a 160 x 160 camera, 1 spp.
+def _small_scanner() -> Scanner:
+    from tests.test_render_support import small_rig
+
+    return Scanner(rig=small_rig(), spp=1, projector=ProjectorModel(pixel=Lookup.bilinear))
+
+
+def _record(directory: Path) -> dict:
+    return json.loads((directory / "run.json").read_text())
+
+
+def test_scan_owns_its_directory_and_overwrite_drops_the_old_evaluation(tmp_path: Path) -> None:
+    out = tmp_path / "scan"
+    scanner = _small_scanner()
+    scan("sphere", out, scanner=scanner)
+    record = _record(out)
+    assert record["command"] == "scan" and record["status"] == "complete"
+    assert {"capture.json", "points.ply", "decoded/source.json", "evaluation.json"} <= set(
+        record["files"]
+    )
+    with pytest.raises(VirtusError, match=r"already holds a `virtus scan` run .* --resume"):
+        scan("sphere", out, scanner=scanner)
+    with pytest.raises(VirtusError, match=r"other settings \(config.scanner.spp: 4 here"):
+        scan("sphere", out, scanner=scanner.with_(spp=4))
+    (out / "evaluation.json").write_text('{"cloud_sha256": "old"}')
+    points = (out / "points.ply").read_bytes()
+    scan("sphere", out, scanner=scanner, overwrite=True)
+    assert not (out / "evaluation.json").exists()  # the previous run's, removed
+    assert (out / "points.ply").read_bytes() == points  # same settings, same cloud
+    resumed = scan("sphere", out, scanner=scanner, resume=True)
+    assert _record(out)["log"][-2:] == ["resume", "reused ."]
+    assert (out / "points.ply").read_bytes() == points and resumed.reconstruction.mask.any()
+
+
+def test_stale_derived_files_are_recomputed_or_refused(freeform_scan: Path, tmp_path: Path):
+    import shutil
+
+    from virtus.runs import file_digest
+
+    directory = tmp_path / "copy"
+    shutil.copytree(freeform_scan, directory)
+    evaluate_scan(directory, register=False)
+    evaluation = json.loads((directory / "evaluation.json").read_text())
+    assert evaluation["cloud_sha256"] == file_digest(directory / "points.ply")
+    source = json.loads((directory / "reconstruction" / "source.json").read_text())
+    assert source["ply_sha256"] == evaluation["cloud_sha256"] and source["rig_sha256"]
+    # A new cloud removes the evaluation of the old one.
+    reconstruct_capture(directory, use="u")
+    assert not (directory / "evaluation.json").exists()
+    # A cloud that is not the recorded reconstruction is refused, not measured.
+    (directory / "points.ply").write_bytes((freeform_scan / "points.ply").read_bytes())
+    with pytest.raises(VirtusError, match="is stale"):
+        evaluate_scan(directory)
+    assert not (directory / "evaluation.json").exists()
+
+
+def test_turntable_resume_keeps_finished_views(tmp_path: Path) -> None:
+    out = tmp_path / "tt"
+    scanner = _small_scanner()
+    first = turntable_scan(None, out, n_views=2, scanner=scanner)
+    merged = (out / "merged.ply").read_bytes()
+    kept = (out / "view_0" / "view.npz").stat()
+    # As if killed after view 0: view 1's result and the merged files are missing.
+    for name in ("view_1/view.npz", "merged.ply", "turntable.json"):
+        (out / name).unlink()
+    with pytest.raises(VirtusError, match="--resume"):
+        turntable_scan(None, out, n_views=2, scanner=scanner)
+    again = turntable_scan(None, out, n_views=2, scanner=scanner, resume=True)
+    after = (out / "view_0" / "view.npz").stat()
+    assert (after.st_ino, after.st_mtime_ns) == (kept.st_ino, kept.st_mtime_ns)
+    log = _record(out)["log"]
+    after_resume = log[log.index("resume") :]
+    assert "reused view 0" in after_resume and "scanned view 1" in after_resume
+    assert not any("view_0" in line for line in after_resume)  # view 0 not scanned again
+    assert again.view_counts == first.view_counts
+    assert (out / "merged.ply").read_bytes() == merged
+    with pytest.raises(InputError, match="turntable views"):
+        turntable_scan(None, tmp_path / "none", n_views=361, scanner=scanner)
+    assert not (tmp_path / "none").exists()
+
+
+def test_ablation_resume_keeps_finished_cells(tmp_path: Path) -> None:
+    from virtus.pipeline.ablation import run_ablation
+
+    out = tmp_path / "ab"
+    options = {"materials": ["matte"], "ambients": ["dark"], "realism": ["ideal", "gamma"]}
+    rows = run_ablation(out, _small_scanner(), **options)
+    cells = sorted(p.name for p in (out / "cells").glob("*.json"))
+    assert cells == ["matte-dark-gamma.json", "matte-dark-ideal.json"]
+    kept = (out / "cells" / "matte-dark-ideal.json").read_bytes()
+    (out / "cells" / "matte-dark-gamma.json").unlink()
+    (out / "ablation.csv").unlink()
+    again = run_ablation(out, _small_scanner(), **options, resume=True)
+    assert json.dumps(again) == json.dumps(rows)
+    assert (out / "cells" / "matte-dark-ideal.json").read_bytes() == kept
+    log = _record(out)["log"]
+    assert log[log.index("resume") + 1 :] == [
+        "reused cells/matte-dark-ideal.json",
+        "measured cells/matte-dark-gamma.json",
+    ]

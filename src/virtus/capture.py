@@ -24,6 +24,16 @@ lengths in metres, camera frame; projector coordinates in projector pixels)::
 
 Format ``virtus.capture/1`` (virtus 0.1) is read too: it has no ``cam2world`` (identity),
 no sensor and no seed.
+
+Writing is safe against failures: frames and ground truth are each written through a
+staging folder and renamed into place (:func:`virtus.runs.atomic_write_files`), the
+manifest last; an error (disk full, permission denied) removes what the call wrote and
+names the path. Jobs that write a capture into an output directory own it through
+:func:`virtus.runs.claim_run` (:data:`LAYOUT`, :meth:`Capture.file_names`).
+
+Memory: a capture holds every frame at once, and rendering holds the trace's taps; both are
+estimated by :func:`capture_bytes` and refused above :data:`MAX_CAPTURE_BYTES` *before*
+anything is rendered or read (:func:`check_capture_bytes`).
 """
 
 from __future__ import annotations
@@ -41,9 +51,10 @@ from virtus import __version__
 from virtus.devices import Rig
 from virtus.errors import InputError, VirtusError
 from virtus.groundtruth import ARRAY_NAMES, GroundTruth
-from virtus.images import list_images, read_images, write_frames
+from virtus.images import frame_name, list_images, read_image, read_images, write_frames
 from virtus.jsonio import write_json
 from virtus.patterns import DecodeResult, PatternSequence
+from virtus.runs import atomic_write_files
 from virtus.safeio import load_npy, read_json
 from virtus.sensor import BIT_DEPTHS, Sensor
 from virtus.transforms import Pose
@@ -69,6 +80,58 @@ _KEYS = (
 )  # fmt: skip
 #: Sub-folders a capture owns (removed when it is overwritten).
 _OWNED = ("frames", "gt", "scene_assets")
+#: Glob patterns of every file a capture writes (for :func:`virtus.runs.claim_run`).
+LAYOUT = (MANIFEST, "frames/*.png", "gt/*.npy", "scene_assets/*")
+#: Largest memory (bytes) one capture may need: its frames plus the renderer's taps
+#: (:func:`capture_bytes`). Twice a 960 x 960 capture of the paper at 16 spp with 8
+#: bounces is ~1 GiB; 8 GiB leaves room for the renderer's other buffers on a 16 GiB laptop.
+MAX_CAPTURE_BYTES = 8 * 2**30
+#: Bytes per trace tap (float32 weight, float32 u_p and v_p), see :mod:`virtus.render.tracing`.
+TAP_BYTES = 12
+
+
+def capture_bytes(
+    n_frames: int, width: int, height: int, bytes_per_value: int, taps_per_pixel: int = 0
+) -> int:
+    """Memory (bytes) a capture needs: ``frames x pixels x bytes + pixels x taps x 12``.
+
+    Parameters
+    ----------
+    n_frames : frames in the sequence.
+    width, height : camera image size, px.
+    bytes_per_value : bytes per digital number (1 for 8-bit frames, 2 for 10-16 bits).
+    taps_per_pixel : trace taps per camera pixel (``spp x bounces x aperture samples``;
+        0 for imported captures, which are not rendered).
+    """
+    pixels = int(width) * int(height)
+    return int(n_frames) * pixels * int(bytes_per_value) + pixels * int(taps_per_pixel) * TAP_BYTES
+
+
+def check_capture_bytes(
+    n_frames: int,
+    width: int,
+    height: int,
+    bytes_per_value: int,
+    taps_per_pixel: int = 0,
+    *,
+    what: str = "capture",
+    budget: int = MAX_CAPTURE_BYTES,
+) -> int:
+    """:func:`capture_bytes`, or :class:`InputError` above ``budget`` naming what to lower.
+
+    ``what`` names the options the sizes come from in the message (e.g. ``"--spp, camera
+    size"``).
+    """
+    need = capture_bytes(n_frames, width, height, bytes_per_value, taps_per_pixel)
+    if need > budget:
+        taps = f" + {taps_per_pixel} trace taps per pixel" if taps_per_pixel else ""
+        raise InputError(
+            f"{what} memory",
+            f"at most {budget / 2**30:g} GiB (frames x pixels x bytes + taps x {TAP_BYTES} bytes)",
+            f"{need / 2**30:.1f} GiB for {n_frames} frames of {width}x{height} px at "
+            f"{bytes_per_value} byte(s){taps}",
+        )
+    return need
 
 
 def bit_depth_of(frames: np.ndarray) -> int:
@@ -192,9 +255,17 @@ class Capture:
             return self.gt_data
         if not self.gt_files:
             raise VirtusError(f"{self.path or 'capture'}: this capture has no ground truth")
-        arrays = {
-            name: load_npy(path, f"ground truth {name}") for name, path in self.gt_files.items()
-        }
+        cam = self.rig.camera.intrinsics
+        arrays = {}
+        for name, path in self.gt_files.items():
+            array = load_npy(path, f"ground truth {name}")
+            if array.shape[:2] != (cam.height, cam.width):
+                raise InputError(
+                    f"ground truth {name} {path}",
+                    f"an array of {cam.width}x{cam.height} px (the rig's camera)",
+                    f"shape {array.shape}",
+                )
+            arrays[name] = array
         return GroundTruth.from_arrays(arrays)
 
     def decode(self, **options: Any) -> DecodeResult:
@@ -253,6 +324,14 @@ class Capture:
         }
         return data
 
+    def file_names(self) -> list[str]:
+        """Relative names of the files :meth:`save` writes (scene assets, named by the scene
+        when saved, excepted): the manifest, ``frames/NNN.png`` and ``gt/<name>.npy``."""
+        names = [MANIFEST, *(f"frames/{frame_name(i)}" for i in range(len(self.sequence)))]
+        if self.has_ground_truth:
+            names += [f"gt/{name}.npy" for name in ARRAY_NAMES]
+        return names
+
     def save(
         self,
         directory: str | Path,
@@ -264,7 +343,10 @@ class Capture:
         """Write the capture (layout in the module docstring); returns ``capture.json``.
 
         An existing capture in ``directory`` raises :class:`VirtusError` unless
-        ``overwrite``, which removes its frames, ground truth and assets first.
+        ``overwrite``, which removes its manifest first (so a capture replaced half-way never
+        looks complete), then its frames, ground truth and assets. Frames and ground truth
+        are written through staging folders, the manifest last; on any error the files this
+        call wrote are removed and the error names the path.
         ``compression``, ``workers``: PNG settings (:func:`virtus.images.write_frames`).
         """
         directory = Path(directory)
@@ -278,17 +360,30 @@ class Capture:
             manifest.unlink()
         for sub in _OWNED:
             shutil.rmtree(directory / sub, ignore_errors=True)
-        directory.mkdir(parents=True, exist_ok=True)
-        paths = write_frames(
-            directory / "frames", self.frames, compression=compression, workers=workers
-        )
-        if self.has_ground_truth:
-            gt_dir = directory / "gt"
-            gt_dir.mkdir(exist_ok=True)
-            for name, array in self.ground_truth.arrays().items():
-                np.save(gt_dir / f"{name}.npy", array)
-        # The manifest is written last: a capture.json means a complete capture.
-        written = write_json(manifest, self.to_dict(directory, paths), indent=1)
+        frames = self.frames
+        frame_names = [frame_name(i) for i in range(len(frames))]
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+            paths = atomic_write_files(
+                directory / "frames",
+                frame_names,
+                lambda staging: write_frames(
+                    staging, frames, compression=compression, workers=workers
+                ),
+            )
+            if self.has_ground_truth:
+                arrays = self.ground_truth.arrays()
+                atomic_write_files(
+                    directory / "gt",
+                    [f"{name}.npy" for name in arrays],
+                    lambda staging: [np.save(staging / f"{n}.npy", a) for n, a in arrays.items()],
+                )
+            # The manifest is written last: a capture.json means a complete capture.
+            written = write_json(manifest, self.to_dict(directory, paths), indent=1)
+        except BaseException:
+            for sub in _OWNED:
+                shutil.rmtree(directory / sub, ignore_errors=True)
+            raise
         object.__setattr__(self, "path", directory)
         object.__setattr__(self, "frame_files", tuple(paths))
         return written
@@ -405,6 +500,8 @@ def import_capture(
         raise InputError(
             "images", f"{len(sequence)} images (one per sequence frame)", f"{len(files)} images"
         )
+    first = read_image(files[0])
+    check_capture_bytes(len(files), first.shape[1], first.shape[0], first.itemsize, what="images")
     frames = read_images(files)
     found = bit_depth_of(frames)
     if bit_depth is None:

@@ -28,6 +28,9 @@ IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".bmp")
 MAX_IMAGE_BYTES = 256 << 20
 #: Largest frame (pixels): 2^28 = 16k x 16k.
 MAX_IMAGE_PIXELS = 1 << 28
+#: Most image files in a folder read as frames (a pattern sequence has at most 4096 frames,
+#: :data:`virtus.patterns.MAX_FRAMES`).
+MAX_IMAGES = 4096
 
 
 def natural_key(name: str) -> list[object]:
@@ -36,11 +39,17 @@ def natural_key(name: str) -> list[object]:
 
 
 def list_images(directory: str | Path) -> list[Path]:
-    """The image files (:data:`IMAGE_SUFFIXES`) directly in ``directory``, naturally sorted."""
+    """The image files (:data:`IMAGE_SUFFIXES`) directly in ``directory``, naturally sorted
+    (at most :data:`MAX_IMAGES`)."""
     folder = Path(directory)
     if not folder.is_dir():
         raise InputError("images", "a folder of image files", str(folder))
-    files = [p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES]
+    files = []
+    for path in folder.iterdir():
+        if path.suffix.lower() in IMAGE_SUFFIXES and path.is_file():
+            files.append(path)
+            if len(files) > MAX_IMAGES:
+                raise InputError("images", f"a folder of at most {MAX_IMAGES} images", str(folder))
     if not files:
         raise InputError(
             "images", f"a folder holding {'/'.join(IMAGE_SUFFIXES)} files", str(folder)

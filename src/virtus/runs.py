@@ -135,14 +135,18 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[Path], object]) 
     ]
 
 
-def json_text(data: Any) -> str:
-    """The JSON text virtus writes: 2-space indent, numpy values allowed, final newline."""
-    return json.dumps(data, indent=2, default=json_default, allow_nan=False) + "\n"
+def json_text(data: Any, *, allow_nan: bool = False) -> str:
+    """The JSON text virtus writes: 2-space indent, numpy values allowed, final newline.
+
+    ``allow_nan``: write NaN/Infinity literals (reports with undefined statistics, read back
+    with ``safeio.read_json(..., allow_nan=True)``); otherwise they raise ``ValueError``.
+    """
+    return json.dumps(data, indent=2, default=json_default, allow_nan=allow_nan) + "\n"
 
 
-def write_json_atomic(path: str | os.PathLike[str], data: Any) -> Path:
+def write_json_atomic(path: str | os.PathLike[str], data: Any, *, allow_nan: bool = False) -> Path:
     """Write ``data`` as JSON (:func:`json_text`) through :func:`atomic_write`."""
-    text = json_text(data)
+    text = json_text(data, allow_nan=allow_nan)
     return atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 
@@ -272,10 +276,10 @@ class RunDirectory:
         self.own(name)
         return atomic_write(self.file(name), write)
 
-    def write_json(self, name: str, data: Any) -> Path:
+    def write_json(self, name: str, data: Any, *, allow_nan: bool = False) -> Path:
         """Register ``name`` and write ``data`` as JSON with :func:`write_json_atomic`."""
         self.own(name)
-        return write_json_atomic(self.file(name), data)
+        return write_json_atomic(self.file(name), data, allow_nan=allow_nan)
 
     def _save(self) -> None:
         write_json_atomic(self.path / RUN_FILE, self.record)

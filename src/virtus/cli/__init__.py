@@ -30,14 +30,17 @@ def _register_commands() -> None:
         ablation_cmd,
         calibrate_cmd,
         capture_cmd,
+        dataset_cmd,
         decode_cmd,
         demo_cmd,
         evaluate_cmd,
+        export_usd_cmd,
         import_cmd,
         patterns_cmd,
         reconstruct_cmd,
         rig_cmd,
         scan_cmd,
+        twin_cmd,
     )
 
     for module in (
@@ -52,6 +55,9 @@ def _register_commands() -> None:
         scan_cmd,
         evaluate_cmd,
         ablation_cmd,
+        dataset_cmd,
+        twin_cmd,
+        export_usd_cmd,
     ):
         module.register(app)
 

@@ -35,16 +35,29 @@ def register(app: typer.Typer) -> None:
         rig: RigOption = None,
         spp: SppOption = 4,
         seed: SeedOption = 0,
+        overwrite: Annotated[
+            bool,
+            typer.Option("--overwrite", help="Remove an earlier run's files in OUT first."),
+        ] = False,
+        resume: Annotated[
+            bool,
+            typer.Option(
+                "--resume",
+                help="Continue an interrupted run in OUT (same settings): finished cells are kept.",
+            ),
+        ] = False,
     ) -> None:
         """Render the 100 mm sphere for every cell, decode it, and report the phase error
-        against the ground truth and the sphere-fit error: OUT/ablation.csv, ablation.json,
-        ablation.png."""
+        against the ground truth and the sphere-fit error: OUT/cells/*.json (one per finished
+        cell), OUT/ablation.csv, ablation.json, ablation.png. OUT is owned by the run
+        (OUT/run.json): another run's directory is refused unless --overwrite."""
         from rich.console import Console
         from rich.table import Table
 
         from virtus.pipeline.ablation import run_ablation
         from virtus.sensor import as_seed
 
+        seed = as_seed(seed)
         scanner = build_scanner(rig=rig, spp=spp)
         console = Console(stderr=True)
         rows = run_ablation(
@@ -53,10 +66,12 @@ def register(app: typer.Typer) -> None:
             materials=_names(materials),
             ambients=_names(ambient),
             realism=_names(realism),
-            seed=as_seed(seed),
+            seed=seed,
             progress=lambda i, n, c: console.print(
                 f"[{i + 1}/{n}] {c.material}, {c.ambient}, {c.realism}", highlight=False
             ),
+            overwrite=overwrite,
+            resume=resume,
         )
         table = Table(title=f"virtus ablation -> {out}")
         for column in ("material", "ambient", "realism", "valid", "phase RMS (rad)",

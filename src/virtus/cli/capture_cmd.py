@@ -46,15 +46,24 @@ def register(app: typer.Typer) -> None:
         projector_lens: ProjectorLensOption = None,
         camera_lens: CameraLensOption = None,
         overwrite: Annotated[
-            bool, typer.Option("--overwrite", help="Replace an existing capture in OUT.")
+            bool,
+            typer.Option("--overwrite", help="Remove an earlier run's files in OUT first."),
+        ] = False,
+        resume: Annotated[
+            bool,
+            typer.Option("--resume", help="Finish an interrupted run in OUT (same settings)."),
         ] = False,
     ) -> None:
         """Render the pattern sequence for one pose; write OUT/frames/000.png ...,
         OUT/capture.json (rig, pose, patterns, sensor, seed, scene, settings) and OUT/gt/*.npy
-        ground truth."""
+        ground truth. OUT is owned by the run (OUT/run.json): another run's directory is
+        refused unless --overwrite."""
+        from virtus.pipeline.scan import capture_job, check_renderable
         from virtus.scene import default_scene, load_scene
         from virtus.sensor import as_seed
 
+        # Every check before anything is claimed, rendered or written.
+        seed = as_seed(seed)
         scanner = build_scanner(
             rig=rig, sequence=sequence, lookup=lookup, projector=projector, spp=spp,
             bit_depth=bit_depth,
@@ -62,12 +71,33 @@ def register(app: typer.Typer) -> None:
             projector_lens=projector_lens, camera_lens=camera_lens,
         )  # fmt: skip
         the_scene = load_scene(scene) if scene is not None else default_scene()
+        check_renderable(scanner, the_scene)
+        config = {
+            "scanner": scanner.to_dict(),
+            "scene": str(scene) if scene is not None else "default",
+            "seed": seed,
+        }
+        timing: dict[str, float] = {}
+
+        def render():  # noqa: ANN202
+            start = time.perf_counter()
+            captured = scanner.capture(the_scene, rng=seed)
+            timing["render_s"] = time.perf_counter() - start
+            return captured
+
         start = time.perf_counter()
-        captured = scanner.capture(the_scene, rng=as_seed(seed))
-        rendered = time.perf_counter()
-        manifest = captured.save(out, overwrite=overwrite)
-        written = time.perf_counter()
-        _summary(captured, manifest, rendered - start, written - rendered)
+        captured = capture_job(
+            out,
+            "capture",
+            config,
+            render,
+            inputs={"scene": scene} if scene is not None else None,
+            overwrite=overwrite,
+            resume=resume,
+        )
+        total = time.perf_counter() - start
+        render_s = timing.get("render_s", 0.0)
+        _summary(captured, out / "capture.json", render_s, total - render_s)
 
 
 def _summary(capture, manifest: Path, render_s: float, write_s: float) -> None:  # noqa: ANN001
@@ -82,9 +112,10 @@ def _summary(capture, manifest: Path, render_s: float, write_s: float) -> None: 
         "frames",
         f"{frames.shape[0]} x {frames.shape[2]} x {frames.shape[1]} px, {capture.bit_depth}-bit",
     )
+    rate = f"{frames.shape[0] / render_s:.1f} frames/s, " if render_s > 0 else "kept, "
     table.add_row(
         "render",
-        f"{render_s:.2f} s ({frames.shape[0] / render_s:.1f} frames/s, "
+        f"{render_s:.2f} s ({rate}"
         f"{settings['spp']} spp, {settings['lookup']}, {settings['mitsuba_variant']})",
     )
     table.add_row("write", f"{write_s:.2f} s (PNG + ground truth)")

@@ -33,11 +33,12 @@ def register(app: typer.Typer) -> None:
         """Decode DIR/frames into DIR/decoded/: phase_v.npy, phase_h.npy (absolute phase, rad),
         proj_uv.npy (H, W, 2 projector px), mask.npy, modulation.npy, flagged.npy (likely
         fringe-order errors), summary.json; NaN where invalid. Warns when many valid pixels
-        are flagged: the sequence description probably does not match the frames."""
+        are flagged: the sequence description probably does not match the frames. No valid
+        pixel at all (black, saturated or wrongly scaled frames) is an error (exit 2) that
+        says why; nothing is written then. Holds DIR's lock while writing."""
         from rich.console import Console
         from rich.table import Table
 
-        from virtus.errors import VirtusError
         from virtus.pipeline import layout
         from virtus.pipeline.scan import decode_capture
 
@@ -63,9 +64,3 @@ def register(app: typer.Typer) -> None:
         table.add_row("summary", str(directory / layout.DECODED_DIR / layout.DECODE_SUMMARY))
         table.add_row("time", f"{elapsed:.2f} s")
         Console().print(table)
-        if not mask.any():
-            raise VirtusError(
-                f"decode: no pixel of {directory} decoded (black, saturated or wrongly scaled "
-                f"frames, or a modulation threshold of {min_modulation} too high); "
-                f"summary in {layout.DECODED_DIR}/{layout.DECODE_SUMMARY}"
-            )

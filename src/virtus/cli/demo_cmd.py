@@ -36,11 +36,26 @@ def register(app: typer.Typer) -> None:
         bounces: BouncesOption = 1,
         projector_lens: ProjectorLensOption = None,
         camera_lens: CameraLensOption = None,
+        overwrite: Annotated[
+            bool,
+            typer.Option("--overwrite", help="Remove an earlier run's files in OUT first."),
+        ] = False,
+        resume: Annotated[
+            bool,
+            typer.Option(
+                "--resume/--no-resume",
+                help="Continue an earlier demo in OUT with the same settings, keeping its "
+                "finished poses and capture (default; a finished demo is re-measured in "
+                "seconds). --no-resume refuses a directory that holds a run.",
+            ),
+        ] = True,
     ) -> None:
         """Calibrate the paper's rig with its 18 board poses, capture the 100 mm sphere,
         reconstruct it with the calibrated parameters, fit a sphere, and compare with the
         paper. Writes OUT/metrics.json, OUT/calibration/ (calibration.json, YAML, paper
-        txt), OUT/scan/ (capture + points.ply)."""
+        txt), OUT/scan/ (capture + points.ply). OUT is owned by the run (OUT/run.json):
+        a demo with other settings, or another command's directory, is refused unless
+        --overwrite; the same demo again continues where it stopped."""
         from rich.console import Console
         from rich.progress import (
             BarColumn,
@@ -73,7 +88,13 @@ def register(app: typer.Typer) -> None:
                     bar.update(task, description=f"{step} ({done}/{total} board poses)",
                                completed=done, total=total)  # fmt: skip
 
-            result = run_demo(out, progress=progress, scanner=scanner)
+            result = run_demo(
+                out,
+                progress=progress,
+                scanner=scanner,
+                overwrite=overwrite,
+                resume=resume and not overwrite,
+            )
         _print_table(console, result.metrics)
         console.print(f"wrote {out / 'metrics.json'}, {out / 'calibration' / 'calibration.json'}, "
                       f"{out / 'scan' / 'points.ply'}")  # fmt: skip

@@ -39,19 +39,27 @@ def register(app: typer.Typer) -> None:
             ),
         ] = None,
         overwrite: Annotated[
-            bool, typer.Option("--overwrite", help="Replace an existing capture in OUT.")
+            bool,
+            typer.Option("--overwrite", help="Remove an earlier run's files in OUT first."),
+        ] = False,
+        resume: Annotated[
+            bool,
+            typer.Option("--resume", help="Finish an interrupted import into OUT (same inputs)."),
         ] = False,
     ) -> None:
         """Import IMAGES as a capture in OUT (the layout of virtus capture, without ground
-        truth); then `virtus decode OUT`, `virtus reconstruct OUT` work on it."""
+        truth); then `virtus decode OUT`, `virtus reconstruct OUT` work on it. OUT is owned
+        by the run (OUT/run.json, with the inputs' checksums): another run's directory is
+        refused unless --overwrite."""
         from rich.console import Console
         from rich.table import Table
 
         from virtus.calib.io import load_calibration
         from virtus.capture import import_capture
         from virtus.errors import InputError
-        from virtus.images import read_image
+        from virtus.images import list_images, read_image
         from virtus.patterns import load_sequence_file
+        from virtus.pipeline.scan import capture_job, check_baseline
 
         seq, listed = load_sequence_file(sequence)
         if listed:
@@ -75,9 +83,29 @@ def register(app: typer.Typer) -> None:
                 "px projector",
                 f"{seq.width}x{seq.height} px",
             )
-        capture = import_capture(files, seq, rig, bit_depth=bit_depth)
-        manifest = capture.save(out, overwrite=overwrite)
-        table = Table(title=f"virtus import -> {manifest.parent}", show_header=False)
+        # Every input is read and checked before OUT is claimed.
+        check_baseline(rig, f"calibration {calibration}")
+        imported = import_capture(files, seq, rig, bit_depth=bit_depth)
+        image_files = files if isinstance(files, list) else list_images(files)
+        inputs: dict[str, Path] = {"sequence": sequence}
+        if calibration.is_dir():
+            inputs.update({f"calibration/{f.name}": f for f in sorted(calibration.iterdir())
+                           if f.is_file()})  # fmt: skip
+        else:
+            inputs["calibration"] = calibration
+        inputs.update({f"image/{i:04d}": f for i, f in enumerate(image_files)})
+        config = {
+            "images": [str(f) for f in image_files],
+            "sequence": str(sequence),
+            "calibration": str(calibration),
+            "units": units and units.value,
+            "bit_depth": bit_depth,
+        }
+        capture = capture_job(
+            out, "import", config, lambda: imported, inputs=inputs, overwrite=overwrite,
+            resume=resume,
+        )  # fmt: skip
+        table = Table(title=f"virtus import -> {out}", show_header=False)
         frames = capture.frames
         table.add_row(
             "frames",

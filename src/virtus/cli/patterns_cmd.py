@@ -18,8 +18,12 @@ def register(app: typer.Typer) -> None:
         """Write the paper's 52-frame sequence (18-step phase shift, T = 18 px, 6-bit Gray +
         complementary, vertical and horizontal, white, black) as DIR/000.png ... and
         DIR/sequence.json describing every frame."""
+        from virtus.optics import Intrinsics
         from virtus.patterns import default_sequence
 
+        # The projector's size within the bounds of any device image (checked before the
+        # patterns are built or written).
+        Intrinsics(1.0, 1.0, 0.0, 0.0, width, height)
         sequence = default_sequence(width, height)
         path = sequence.save(out)
         typer.echo(

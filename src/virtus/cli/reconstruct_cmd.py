@@ -32,15 +32,21 @@ def register(app: typer.Typer) -> None:
         ] = None,
         units: UnitsOption = None,
         out: Annotated[
-            Path | None, typer.Option(help="Output PLY; default: DIR/points.ply.")
+            Path | None,
+            typer.Option(
+                help="Output PLY; default: DIR/points.ply (with DIR/reconstruction/); another "
+                "path gets only the PLY."
+            ),
         ] = None,
         use: Annotated[
             UseCoordinates,
             typer.Option(help="Projector coordinates to triangulate with: uv (both), u or v."),
         ] = UseCoordinates.uv,
     ) -> None:
-        """Triangulate DIR (decoding it first if needed) into DIR/points.ply (binary PLY,
-        metres, camera frame, with normals) and DIR/reconstruction/{points,depth,mask}.npy."""
+        """Triangulate DIR (decoding it first if needed or stale) into DIR/points.ply (binary
+        PLY, metres, camera frame, with normals) and DIR/reconstruction/{points,depth,mask}.npy
+        with source.json tying them to the frames and the rig. A rig without baseline, no
+        decoded pixel or no point is an error (exit 2). Holds DIR's lock while writing."""
         import numpy as np
         from rich.console import Console
         from rich.table import Table

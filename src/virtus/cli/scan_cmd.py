@@ -65,37 +65,52 @@ def register(app: typer.Typer) -> None:
             bool, typer.Option("--refine", help="Turntable: refine each view's pose by ICP.")
         ] = False,
         overwrite: Annotated[
-            bool, typer.Option("--overwrite", help="Replace existing captures in OUT.")
+            bool,
+            typer.Option("--overwrite", help="Remove an earlier run's files in OUT first."),
+        ] = False,
+        resume: Annotated[
+            bool,
+            typer.Option(
+                "--resume",
+                help="Continue an interrupted run in OUT (same settings): finished turntable "
+                "views and a complete capture are kept.",
+            ),
         ] = False,
     ) -> None:
         """Render the scene with the true rig (52 frames), save the capture in OUT (layout of
-        virtus capture), decode it and write OUT/points.ply (metres, camera frame)."""
+        virtus capture), decode it and write OUT/points.ply (metres, camera frame). OUT is
+        owned by the run (OUT/run.json): another run's directory is refused unless
+        --overwrite."""
         from rich.console import Console
         from rich.table import Table
 
         from virtus.pipeline.scan import ScanSettings, load_rig_file
         from virtus.pipeline.scan import scan as run_scan
-        from virtus.pipeline.scenes import resolve_scene
+        from virtus.pipeline.scenes import BUILTIN_SCENES, resolve_scene
+        from virtus.pipeline.turntable import check_views
         from virtus.sensor import as_seed
 
+        # Every check before anything is claimed, rendered or written.
         settings = ScanSettings(seed=as_seed(seed))
+        if turntable:
+            check_views(turntable)
         scanner = build_scanner(
             rig=rig, sequence=sequence, lookup=lookup, projector=projector, spp=spp,
             bit_depth=bit_depth,
             sensor=sensor, variant=variant, bounces=bounces,
             projector_lens=projector_lens, camera_lens=camera_lens,
         )  # fmt: skip
-        # Read the calibration before anything is rendered or written.
         used = (
             None
             if calibration is None
             else load_rig_file(calibration, scanner.rig, units=units and units.value)
         )
-        the_scene = resolve_scene(scene, out)
+        builtin = scene in BUILTIN_SCENES and not Path(scene).is_file()
+        the_scene = scene if builtin else resolve_scene(scene, out)  # a YAML file: read only
         console = Console()
         if turntable:
             _turntable(console, the_scene, out, turntable, scanner, used, settings,
-                       refine, overwrite)  # fmt: skip
+                       refine, overwrite, resume)  # fmt: skip
             return
         result = run_scan(
             the_scene,
@@ -104,6 +119,7 @@ def register(app: typer.Typer) -> None:
             calibration=used,
             settings=settings,
             overwrite=overwrite,
+            resume=resume,
         )
         recon = result.reconstruction
         table = Table(title=f"virtus scan -> {out}", show_header=False)
@@ -119,28 +135,39 @@ def register(app: typer.Typer) -> None:
         console.print(f"next: virtus evaluate {out}  (C2M against the scene's meshes)")
 
 
-def _turntable(console, scene, out, n_views, scanner, calibration, settings, refine, overwrite):  # noqa: ANN001
+def _turntable(console, scene, out, n_views, scanner, calibration, settings, refine, overwrite,  # noqa: ANN001
+               resume):  # fmt: skip
+    import numpy as np
     from rich.table import Table
 
     from virtus.errors import InputError
+    from virtus.pipeline.scenes import FREEFORM_CENTRE_M
     from virtus.pipeline.turntable import turntable_scan
     from virtus.scene import MeshObject
+    from virtus.transforms import Pose
 
-    meshes = [o for o in scene.objects if isinstance(o, MeshObject)]
-    if len(meshes) != 1:
-        raise InputError("scene", "exactly one mesh object for a turntable scan", f"{len(meshes)}")
-    obj = meshes[0]
+    if scene == "freeform":  # the built-in object, written into OUT by the run
+        mesh_path, scale, start = None, 1.0, Pose(np.eye(3), FREEFORM_CENTRE_M)
+    else:
+        objects = [] if isinstance(scene, str) else list(scene.objects)
+        meshes = [o for o in objects if isinstance(o, MeshObject)]
+        if len(meshes) != 1:
+            raise InputError(
+                "scene", "exactly one mesh object for a turntable scan", f"{len(meshes)}"
+            )
+        mesh_path, scale, start = meshes[0].path, meshes[0].scale_to_m, meshes[0].pose
     result = turntable_scan(
-        obj.path,
+        mesh_path,
         out,
         n_views=n_views,
-        scale_to_m=obj.scale_to_m,
-        start=obj.pose,
+        scale_to_m=scale,
+        start=start,
         scanner=scanner,
         calibration=calibration,
         settings=settings,
         refine=refine,
         overwrite=overwrite,
+        resume=resume,
     )
     s = result.c2m.stats.to_dict()
     table = Table(title=f"turntable scan, {n_views} views -> {result.ply_path}", show_header=False)

@@ -13,11 +13,26 @@ and one realism setting, decodes it, and reports
 
 The table is written as ``ablation.csv`` and ``ablation.json`` and drawn as
 ``ablation.png`` (radius error and phase error per cell).
+
+Output directory (owned by the run through :func:`virtus.runs.claim_run`, command
+``ablation``)::
+
+    OUT/run.json, OUT/.virtus.lock        the run record and lock (see virtus.runs)
+    OUT/cells/<material>-<ambient>-<realism>.json   one finished cell's row (written as soon as
+                                          the cell is measured) and the run's config digest
+    OUT/ablation.csv, ablation.json, ablation.png   the table, written at the end
+
+**Resumable**: ``resume=True`` (``virtus ablation --resume``) keeps every finished cell
+(its file must belong to this run's configuration) and measures only the others; a cell
+is a whole capture, so at most one is lost when a run is killed. At most :data:`MAX_CELLS`
+cells (every combination of the tables), each checked against the capture memory budget
+before anything is rendered.
 """
 
 from __future__ import annotations
 
 import csv
+import io
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -27,11 +42,12 @@ from typing import Any
 import numpy as np
 
 from virtus.errors import InputError, VirtusError
-from virtus.jsonio import write_json
 from virtus.pipeline.demo import sphere_roi_fit
-from virtus.pipeline.scan import EDGE_MAX_STEP, reconstruct
+from virtus.pipeline.scan import EDGE_MAX_STEP, check_renderable, reconstruct
 from virtus.projection import PROJECTOR_PRESETS
 from virtus.reconstruct import depth_edge_mask
+from virtus.runs import RunDirectory, claim_run, config_digest
+from virtus.safeio import read_json
 from virtus.scanner import Scanner
 from virtus.sensor import SENSOR_PRESETS
 
@@ -57,6 +73,15 @@ REALISM: dict[str, Callable[[Scanner], Scanner]] = {
         sensor=SENSOR_PRESETS["imx174"], projector=PROJECTOR_PRESETS["lightcrafter"], bounces=2
     ),
 }
+#: Most cells of one run: every combination of the tables.
+MAX_CELLS = len(MATERIALS) * len(AMBIENTS) * len(REALISM)
+#: The job's name in ``run.json``.
+COMMAND = "ablation"
+#: Result files (relative), and the folder of the per-cell files.
+RESULT_FILES = ("ablation.csv", "ablation.json", "ablation.png")
+CELL_DIR = "cells"
+#: Files of the job (an earlier run's when found without a ``run.json``).
+LAYOUT = (*RESULT_FILES, f"{CELL_DIR}/*.json")
 #: Columns of the table, in order.
 COLUMNS = (
     "material", "ambient", "realism", "valid_fraction", "proj_error_rms_px", "phase_error_rms_rad",
@@ -73,13 +98,20 @@ class AblationCell:
     ambient: str
     realism: str
 
+    @property
+    def file(self) -> str:
+        """The cell's result file, relative to the run's directory."""
+        return f"{CELL_DIR}/{self.material}-{self.ambient}-{self.realism}.json"
+
 
 def _choose(names: list[str] | None, table: dict[str, Any], what: str) -> list[str]:
     if names is None:
         return list(table)
+    if not isinstance(names, list | tuple) or not all(isinstance(n, str) for n in names):
+        raise InputError(what, f"a list of names among {list(table)}", names)
     unknown = [n for n in names if n not in table]
     if unknown or not names:
-        raise InputError(what, f"names among {list(table)}", unknown or names)
+        raise InputError(what, f"names among {list(table)}", unknown[:5] or names)
     return list(dict.fromkeys(names))
 
 
@@ -138,6 +170,24 @@ def run_cell(scanner: Scanner, cell: AblationCell, *, seed: int = 0) -> dict[str
     return row
 
 
+def ablation_cells(
+    materials: list[str] | None = None,
+    ambients: list[str] | None = None,
+    realism: list[str] | None = None,
+) -> list[AblationCell]:
+    """The cells of materials x ambient levels x realism settings (default: all), checked:
+    known names, at most :data:`MAX_CELLS` cells."""
+    cells = [
+        AblationCell(m, a, r)
+        for m in _choose(materials, MATERIALS, "materials (--materials)")
+        for a in _choose(ambients, AMBIENTS, "ambients (--ambient)")
+        for r in _choose(realism, REALISM, "realism (--realism)")
+    ]
+    if len(cells) > MAX_CELLS:  # cannot happen with de-duplicated names; the bound is stated
+        raise InputError("ablation cells", f"at most {MAX_CELLS}", len(cells))
+    return cells
+
+
 def run_ablation(
     out_dir: str | Path,
     scanner: Scanner | None = None,
@@ -147,49 +197,101 @@ def run_ablation(
     realism: list[str] | None = None,
     seed: int = 0,
     progress: Callable[[int, int, AblationCell], None] | None = None,
+    overwrite: bool = False,
+    resume: bool = False,
 ) -> list[dict[str, Any]]:
     """Run every cell of materials x ambient levels x realism settings.
 
     Parameters
     ----------
-    out_dir : directory for ``ablation.csv``, ``ablation.json`` and ``ablation.png``.
+    out_dir : directory owned by the run (layout in the module docstring).
     scanner : the ideal scanner the realism settings modify (default: the paper's system).
     materials, ambients, realism : names to run (default: all of :data:`MATERIALS`,
         :data:`AMBIENTS`, :data:`REALISM`).
     seed : seed of the noise streams and the sphere fit.
     progress : called before each cell as ``progress(index, total, cell)``.
+    overwrite : remove an earlier run's files first.
+    resume : continue the run in ``out_dir``: finished cells are kept.
 
     Returns
     -------
     One dict per cell with :data:`COLUMNS`.
+
+    Raises
+    ------
+    InputError : unknown names, or a cell's capture over the memory budget (before anything
+        is written).
+    VirtusError : ``out_dir`` in use or holding another run's files.
     """
+    from virtus.sensor import as_seed
+
     scanner = scanner or Scanner()
-    cells = [
-        AblationCell(m, a, r)
-        for m in _choose(materials, MATERIALS, "materials")
-        for a in _choose(ambients, AMBIENTS, "ambients")
-        for r in _choose(realism, REALISM, "realism")
-    ]
-    root = Path(out_dir)
-    root.mkdir(parents=True, exist_ok=True)
+    cells = ablation_cells(materials, ambients, realism)
+    seed = as_seed(seed)
+    for name in dict.fromkeys(c.realism for c in cells):
+        check_renderable(REALISM[name](scanner))
+    config = {
+        "scanner": scanner.to_dict(),
+        "cells": [[c.material, c.ambient, c.realism] for c in cells],
+        "seed": seed,
+    }
+    with claim_run(
+        out_dir, COMMAND, config, layout=LAYOUT, overwrite=overwrite, resume=resume
+    ) as run:
+        return _run_cells(run, scanner, cells, seed, config_digest(config), progress)
+
+
+def _run_cells(
+    run: RunDirectory,
+    scanner: Scanner,
+    cells: list[AblationCell],
+    seed: int,
+    episode: str,
+    progress: Callable[[int, int, AblationCell], None] | None,
+) -> list[dict[str, Any]]:
+    run.own(*(cell.file for cell in cells), *RESULT_FILES)
     rows, start = [], time.perf_counter()
     for index, cell in enumerate(cells):
         if progress is not None:
             progress(index, len(cells), cell)
-        rows.append(run_cell(scanner, cell, seed=seed))
-    with (root / "ablation.csv").open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=COLUMNS)
-        writer.writeheader()
-        writer.writerows(rows)
-    write_json(
-        root / "ablation.json",
-        {"units": {"radius_error_mm": "mm", "fit_rms_mm": "mm", "proj_error_rms_px": "projector px",
-                   "phase_error_rms_rad": "rad"},
-         "scanner": scanner.to_dict(), "seed": seed, "cells": rows,
-         "time_s": round(time.perf_counter() - start, 2)},
-    )  # fmt: skip
-    plot_ablation(rows, root / "ablation.png")
+        if run.resumed and run.file(cell.file).is_file():
+            rows.append(_load_cell(run.file(cell.file), cell, episode))
+            run.log(f"reused {cell.file}")
+            continue
+        row = run_cell(scanner, cell, seed=seed)
+        run.write_json(cell.file, {"episode": episode, "row": row}, allow_nan=True)
+        run.log(f"measured {cell.file}")
+        rows.append(row)
+    text = io.StringIO(newline="")
+    writer = csv.DictWriter(text, fieldnames=COLUMNS)
+    writer.writeheader()
+    writer.writerows(rows)
+    run.write("ablation.csv", lambda tmp: tmp.write_text(text.getvalue(), newline=""))
+    report = {
+        "units": {"radius_error_mm": "mm", "fit_rms_mm": "mm",
+                  "proj_error_rms_px": "projector px", "phase_error_rms_rad": "rad"},
+        "scanner": scanner.to_dict(), "seed": seed, "cells": rows,
+        "time_s": round(time.perf_counter() - start, 2),
+    }  # fmt: skip
+    run.write_json("ablation.json", report, allow_nan=True)
+    run.write("ablation.png", lambda tmp: plot_ablation(rows, tmp))
     return rows
+
+
+def _load_cell(path: Path, cell: AblationCell, episode: str) -> dict[str, Any]:
+    """A finished cell's row, checked to belong to this run's configuration."""
+    data = read_json(path, "ablation cell", expect=dict, allow_nan=True)
+    row = data.get("row")
+    if data.get("episode") != episode or not isinstance(row, dict) or set(row) != set(COLUMNS):
+        raise VirtusError(
+            f"{path} was made by another ablation configuration; remove it or start again "
+            "with --overwrite"
+        )
+    if (row["material"], row["ambient"], row["realism"]) != (
+        cell.material, cell.ambient, cell.realism
+    ):  # fmt: skip
+        raise VirtusError(f"{path} holds another cell; remove it or start again with --overwrite")
+    return row
 
 
 def plot_ablation(rows: list[dict[str, Any]], path: Path) -> Path:

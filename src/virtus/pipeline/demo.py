@@ -11,6 +11,11 @@
 4. robust sphere fit on the points of the sphere's region of interest -> radius, error,
    inlier ratio, fit RMS; the same fit with the true rig is reported for reference;
 5. ``DIR/metrics.json`` (metrics, the config used, provenance) next to the paper's numbers.
+
+``DIR`` is owned by the run (:func:`virtus.runs.claim_run`, command ``demo``): another
+run's directory is refused unless ``overwrite``; ``resume`` continues an interrupted demo
+(finished calibration poses and a complete sphere capture are kept). ``DIR/calibration/``
+is the calibration job's own run directory (its ``run.json``), owned by the demo's run.
 """
 
 from __future__ import annotations
@@ -25,9 +30,17 @@ import numpy as np
 
 from virtus import paper
 from virtus.errors import VirtusError
-from virtus.jsonio import write_json
 from virtus.metrology import SphereFit, fit_sphere
-from virtus.pipeline.scan import Reconstruction, ScanSettings, reconstruct, scan
+from virtus.pipeline.scan import (
+    SCAN_LAYOUT,
+    Reconstruction,
+    ScanSettings,
+    check_baseline,
+    check_renderable,
+    reconstruct,
+    scan_into,
+)
+from virtus.runs import RunDirectory, claim_run
 from virtus.scanner import Scanner
 
 __all__ = ["PAPER", "DemoConfig", "DemoResult", "run_demo", "sphere_roi_fit"]
@@ -36,6 +49,20 @@ __all__ = ["PAPER", "DemoConfig", "DemoResult", "run_demo", "sphere_roi_fit"]
 PAPER = paper.DEMO
 #: What the demo promises (issue "End to end").
 TARGETS = {"radius_error_mm": 0.05, "inlier_ratio": 0.98, "total_s": 120.0}
+#: The job's name in ``run.json``.
+COMMAND = "demo"
+#: Sub-directories: the calibration run and the sphere scan.
+CALIBRATION_DIR = "calibration"
+SCAN_DIR = "scan"
+METRICS_FILE = "metrics.json"
+ERROR_MAP_FILE = f"{SCAN_DIR}/sphere_radial_error.npy"
+#: Files of the job (an earlier run's when found without a ``run.json``).
+LAYOUT = (
+    METRICS_FILE,
+    ERROR_MAP_FILE,
+    f"{CALIBRATION_DIR}/calibration.json",
+    *(f"{SCAN_DIR}/{pattern}" for pattern in SCAN_LAYOUT),
+)
 
 
 @dataclass(frozen=True)
@@ -117,34 +144,51 @@ def run_demo(
     *,
     progress: Any = None,
     scanner: Scanner | None = None,
+    overwrite: bool = False,
+    resume: bool = False,
 ) -> DemoResult:
     """Calibrate, capture the sphere, reconstruct with the calibration, fit, report.
 
     Parameters
     ----------
-    out_dir : output directory (created; an existing demo there is replaced).
+    out_dir : output directory, owned by the run (see the module docstring).
     config : settings (defaults reproduce the paper's experiment).
     scanner : the virtual scanner that captures the board poses and the sphere -- one
         sensor model for both (default: the paper's system, sharp DMD pixels).
     progress : optional ``progress(step: str)`` callback, and ``progress(step, done, total)``
         during calibration.
+    overwrite : remove an earlier run's files in ``out_dir`` first.
+    resume : continue the demo in ``out_dir`` (same settings).
 
     Returns
     -------
     :class:`DemoResult`; ``DIR/metrics.json``, ``DIR/calibration/calibration.json`` and
     ``DIR/scan/`` written.
     """
+    from virtus.pipeline.calibrate import check_pose_spec
+
+    config = config or DemoConfig()
+    scanner = scanner or Scanner()
+    check_pose_spec(config.poses)
+    check_baseline(scanner.rig)
+    check_renderable(scanner)
+    run_config = {"config": config.to_dict(), "scanner": scanner.to_dict()}
+    with claim_run(
+        out_dir, COMMAND, run_config, layout=LAYOUT, overwrite=overwrite, resume=resume
+    ) as run:
+        return _run(run, config, scanner, progress)
+
+
+def _run(run: RunDirectory, config: DemoConfig, scanner: Scanner, progress: Any) -> DemoResult:
+    """The demo's steps inside its claimed directory (see :func:`run_demo`)."""
     from virtus.pipeline.calibrate import calibrate_rig
     from virtus.scene import SphereObject, default_scene
 
-    config = config or DemoConfig()
-    root = Path(out_dir)
-    root.mkdir(parents=True, exist_ok=True)
+    root = run.path
     say = progress or (lambda *args: None)
     t_start = time.perf_counter()
     timing: dict[str, float] = {}
 
-    scanner = scanner or Scanner()
     true_rig = scanner.rig
     say("calibration")
     start = time.perf_counter()
@@ -154,8 +198,9 @@ def run_demo(
         poses=config.poses,
         rng=config.seed,
         progress=lambda done, total, name: say("calibration", done, total),
-        out_dir=root / "calibration",
-        overwrite=True,
+        out_dir=root / CALIBRATION_DIR,
+        overwrite=not run.resumed,
+        resume=run.resumed,
     )
     timing["calibration_s"] = time.perf_counter() - start
 
@@ -163,13 +208,8 @@ def run_demo(
     scene = default_scene()
     sphere = next(o for o in scene.objects if isinstance(o, SphereObject))
     start = time.perf_counter()
-    scanned = scan(
-        scene,
-        root / "scan",
-        scanner=scanner,
-        calibration=calibration.rig,
-        settings=config.scan,
-        overwrite=True,
+    scanned = scan_into(
+        run, SCAN_DIR, scene, scanner, check_baseline(calibration.rig, "calibration"), config.scan
     )
     timing["scan_s"] = time.perf_counter() - start
 
@@ -183,7 +223,7 @@ def run_demo(
         threshold_m=config.sphere_threshold_m,
         rng=config.seed,
     )
-    np.save(root / "scan" / "sphere_radial_error.npy", error_map)
+    run.write(ERROR_MAP_FILE, lambda tmp: np.save(tmp, error_map))
     timing["fit_s"] = time.perf_counter() - start
 
     # Reference: the same frames triangulated with the true rig (what calibration costs).
@@ -251,7 +291,7 @@ def run_demo(
             "radial_error_map": "scan/sphere_radial_error.npy",
         },
     }
-    write_json(root / "metrics.json", metrics)
+    run.write_json(METRICS_FILE, metrics, allow_nan=True)
     return DemoResult(root, metrics, fit, calibration)
 
 

@@ -10,6 +10,7 @@ extrinsics), the distances measure the shape.
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -18,10 +19,11 @@ import numpy as np
 
 from virtus.checks import as_points, positive
 from virtus.errors import VirtusError
-from virtus.jsonio import write_json
 from virtus.metrology import C2MResult, cloud_to_mesh
 from virtus.pipeline import layout
+from virtus.pipeline.scan import check_points_current
 from virtus.ply import read_ply
+from virtus.runs import directory_lock, file_digest, write_json_atomic
 from virtus.transforms import Pose
 
 __all__ = ["MeshEvaluation", "evaluate_points", "evaluate_scan", "scene_meshes"]
@@ -120,14 +122,18 @@ def evaluate_scan(
     Parameters
     ----------
     scan_dir : directory from ``virtus scan`` (capture + ``points.ply``).
-    ply_path : the cloud to evaluate (default ``scan_dir/points.ply``); metres, camera frame.
+    ply_path : the cloud to evaluate (default ``scan_dir/points.ply``, which must be the
+        latest reconstruction of the frames the directory holds:
+        :func:`virtus.pipeline.scan.check_points_current`); metres, camera frame.
     register : ICP before measuring.
-    save : write ``scan_dir/evaluation.json``.
+    save : write ``scan_dir/evaluation.json`` (with the cloud's SHA-256, ``cloud_sha256``,
+        which ties it to the cloud it measured), holding the directory's lock.
 
     Raises
     ------
     VirtusError
-        The scene has no mesh object, the PLY is missing, not a PLY or empty.
+        The scene has no mesh object; the PLY is missing, not a PLY, empty or stale; the
+        directory is in use by another run.
     """
     from virtus.capture import load_capture
 
@@ -142,16 +148,28 @@ def evaluate_scan(
             f"evaluate: the scene of {directory} has no mesh object to compare with "
             f"(it has: {kinds}); C2M needs a mesh (for spheres use the sphere fit of `virtus demo`)"
         )
-    source = Path(ply_path) if ply_path is not None else directory / layout.POINTS_PLY
+    default = directory / layout.POINTS_PLY
+    source = Path(ply_path) if ply_path is not None else default
     if not source.is_file():
         raise VirtusError(f"evaluate: no point cloud at {source} (run `virtus reconstruct` first)")
-    cloud = read_ply(source)
-    if len(cloud) == 0:
-        raise VirtusError(f"evaluate: {source} holds no points")
-    if cloud.units not in (None, "m"):
-        raise VirtusError(f"evaluate: {source} states units {cloud.units!r}; expected metres")
-    results = evaluate_points(cloud.points, meshes, register=register)
-    if save:
-        report = {"units": "mm", "cloud": str(source), "meshes": [r.to_dict() for r in results]}
-        write_json(directory / layout.EVALUATION_JSON, report)
+    lock = directory_lock(directory) if save else contextlib.nullcontext()
+    with lock:
+        if source.resolve() == default.resolve():
+            digest = check_points_current(capture, source)
+        else:
+            digest = file_digest(source)
+        cloud = read_ply(source)
+        if len(cloud) == 0:
+            raise VirtusError(f"evaluate: {source} holds no points")
+        if cloud.units not in (None, "m"):
+            raise VirtusError(f"evaluate: {source} states units {cloud.units!r}; expected metres")
+        results = evaluate_points(cloud.points, meshes, register=register)
+        if save:
+            report = {
+                "units": "mm",
+                "cloud": str(source),
+                "cloud_sha256": digest,
+                "meshes": [r.to_dict() for r in results],
+            }
+            write_json_atomic(directory / layout.EVALUATION_JSON, report, allow_nan=True)
     return results

@@ -11,6 +11,23 @@ its points are mapped back into the object frame by the known turntable pose
 (``X_obj = object2cam_k^-1 X_cam``), optionally refined by ICP against the mesh, and all views
 are concatenated into one cloud. The merged cloud is then compared with the mesh by C2M
 (after a global ICP, as for a single view).
+
+Output directory (owned by the run through :func:`virtus.runs.claim_run`, command
+``turntable``)::
+
+    OUT/run.json, OUT/.virtus.lock   the run record and lock (see virtus.runs)
+    OUT/view_<k>/               view k: a scan directory (capture, decoded/, points.ply, ...)
+    OUT/view_<k>/view.npz       view k's result, written when the view is finished:
+                                points (N, 3) float64 object frame, metres (after the box
+                                crop and the optional ICP refinement), object2cam (4, 4),
+                                refinement (2,) deg and mm, episode (the run's config digest)
+    OUT/freeform.stl            the built-in free-form object's mesh (when it is scanned)
+    OUT/merged.ply              the merged cloud, object frame, metres
+    OUT/turntable.json          the report (views, counts, C2M in mm, settings)
+
+**Resumable**: ``resume=True`` (``virtus scan --turntable N --resume``) keeps every finished
+view (its ``view.npz`` must belong to this run's configuration) and, for the view that was
+in progress, a complete capture; only the rest is rendered.
 """
 
 from __future__ import annotations
@@ -22,14 +39,19 @@ from typing import Any
 
 import numpy as np
 
-from virtus.checks import positive_int
+from virtus.checks import positive, positive_int
 from virtus.devices import Rig
 from virtus.errors import InputError, VirtusError
-from virtus.jsonio import write_json
 from virtus.metrology import C2MResult, MeshIndex, cloud_to_mesh, icp_to_mesh
-from virtus.pipeline.scan import ScanSettings, scan
+from virtus.pipeline.scan import (
+    ScanSettings,
+    calibration_rig,
+    check_renderable,
+    scan_into,
+)
 from virtus.pipeline.scenes import FREEFORM_CENTRE_M
 from virtus.ply import write_ply
+from virtus.runs import RunDirectory, claim_run, config_digest
 from virtus.scanner import Scanner
 from virtus.transforms import Pose
 
@@ -42,6 +64,12 @@ _BOX_MARGIN_M = 0.003
 _ICP_MAX_DISTANCE_M = 0.002
 #: Most turntable views (one per degree): each view is a whole capture on disk.
 MAX_VIEWS = 360
+#: The job's name in ``run.json``.
+COMMAND = "turntable"
+#: A finished view's result file, inside its directory.
+VIEW_FILE = "view.npz"
+#: Files of the job (an earlier run's when found without a ``run.json``).
+LAYOUT = ("turntable.json", "merged.ply", "view_*/" + VIEW_FILE, "view_*/capture.json")
 
 
 def turntable_poses(n_views: int, start: Pose | None = None) -> list[Pose]:
@@ -104,8 +132,16 @@ class TurntableResult:
         }
 
 
+def check_views(n_views: object) -> int:
+    """``n_views`` as an int in 1..:data:`MAX_VIEWS`, else :class:`InputError`."""
+    n = positive_int("turntable views (--turntable)", n_views)
+    if n > MAX_VIEWS:
+        raise InputError("turntable views (--turntable)", f"at most {MAX_VIEWS} views", n)
+    return n
+
+
 def turntable_scan(
-    mesh_path: str | Path,
+    mesh_path: str | Path | None,
     out_dir: str | Path,
     *,
     n_views: int = 8,
@@ -116,67 +152,129 @@ def turntable_scan(
     settings: ScanSettings | None = None,
     refine: bool = False,
     overwrite: bool = False,
+    resume: bool = False,
 ) -> TurntableResult:
     """Scan a mesh object from ``n_views`` turntable angles and merge the views.
 
     Parameters
     ----------
-    mesh_path : the object's mesh file (STL/OBJ/PLY); its frame is the object frame.
-    out_dir : directory; view ``k`` goes to ``out_dir/view_k``, the merged cloud to
-        ``out_dir/merged.ply`` and the report to ``out_dir/turntable.json``.
-    n_views : number of turntable angles.
+    mesh_path : the object's mesh file (STL/OBJ/PLY); its frame is the object frame. None:
+        the built-in free-form object (:func:`virtus.objects.freeform_object`, metres),
+        written as ``out_dir/freeform.stl``.
+    out_dir : directory owned by the run (layout in the module docstring).
+    n_views : number of turntable angles, 1..:data:`MAX_VIEWS`.
     scale_to_m : metres per mesh-file unit.
     start : object2cam of view 0 (see :func:`turntable_poses`).
     scanner : the virtual scanner (default: the paper's system).
     calibration : rig or calibration file to triangulate with (default: the scanner's rig).
     settings : scan settings.
     refine : refine each view's known pose by ICP against the mesh before merging.
-    overwrite : replace existing captures.
-    """
-    import trimesh
+    overwrite : remove an earlier run's files first.
+    resume : continue the run in ``out_dir``: finished views are kept.
 
+    Raises
+    ------
+    InputError, VirtusError : bad arguments, an unreadable mesh or calibration, a capture
+        over the memory budget (all before anything is written); ``out_dir`` in use or
+        holding another run's files; no view that saw the object.
+    """
     from virtus.scene import MeshObject, Scene
 
     settings = settings or ScanSettings()
     scanner = scanner or Scanner()
-    n_views = positive_int("n_views", n_views)
-    if n_views > MAX_VIEWS:
-        raise InputError("n_views", f"at most {MAX_VIEWS} turntable views", n_views)
-    root = Path(out_dir)
-    root.mkdir(parents=True, exist_ok=True)
-    mesh = trimesh.load(mesh_path, force="mesh", process=False)
-    mesh.apply_scale(scale_to_m)
+    n_views = check_views(n_views)
+    scale = positive("scale_to_m", scale_to_m)
+    used = calibration_rig(calibration, scanner)
+    poses = turntable_poses(n_views, start)
+    if mesh_path is None:
+        from virtus.objects import freeform_object
+
+        built = freeform_object()
+        vertices, faces = np.asarray(built.vertices), np.asarray(built.faces)
+        check_renderable(scanner)
+    else:
+        with np.errstate(all="ignore"):  # a far-off mesh is refused by name, not warned about
+            vertices, faces, _ = MeshObject(path=Path(mesh_path), scale_to_m=scale).load()
+        first = MeshObject(path=Path(mesh_path), scale_to_m=scale, pose=poses[0])
+        check_renderable(scanner, Scene(objects=(first,)))
+    config = {
+        "mesh": "freeform" if mesh_path is None else str(mesh_path),
+        "n_views": n_views,
+        "scale_to_m": scale,
+        "start": poses[0].to_dict(),
+        "scanner": scanner.to_dict(),
+        "calibration": None if calibration is None else used.to_dict(),
+        "settings": settings.to_dict(),
+        "refine": bool(refine),
+    }
+    inputs = {} if mesh_path is None else {"mesh": mesh_path}
+    with claim_run(
+        out_dir, COMMAND, config, inputs=inputs, layout=LAYOUT, overwrite=overwrite,
+        resume=resume,
+    ) as run:  # fmt: skip
+        if mesh_path is None:
+            run.own("freeform.stl")
+            mesh_path = run.file("freeform.stl")
+            run.write("freeform.stl", lambda tmp: built.export(tmp, file_type="stl"))
+        import trimesh
+
+        mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
+        return _run_views(run, config, mesh, Path(mesh_path), scale, poses, scanner, used,
+                          settings, refine)  # fmt: skip
+
+
+def _run_views(
+    run: RunDirectory,
+    config: dict[str, Any],
+    mesh: Any,
+    mesh_path: Path,
+    scale: float,
+    poses: list[Pose],
+    scanner: Scanner,
+    rig: Rig,
+    settings: ScanSettings,
+    refine: bool,
+) -> TurntableResult:
+    from virtus.scene import MeshObject, Scene
+
     index = MeshIndex(mesh)
     low, high = mesh.bounds[0] - _BOX_MARGIN_M, mesh.bounds[1] + _BOX_MARGIN_M
-
-    poses = turntable_poses(n_views, start)
+    episode = config_digest(config)
     clouds, counts, refinements = [], [], []
     timing = {"scan_s": 0.0, "merge_s": 0.0}
     for k, object2cam in enumerate(poses):
-        start = time.perf_counter()
-        placed = MeshObject(path=Path(mesh_path), scale_to_m=scale_to_m, pose=object2cam)
-        scene = Scene(objects=(placed,))
-        result = scan(
-            scene,
-            root / f"view_{k}",
-            scanner=scanner,
-            calibration=calibration,
-            settings=settings,
-            overwrite=overwrite,
-        )
-        timing["scan_s"] += time.perf_counter() - start
-        start = time.perf_counter()
-        points = object2cam.inverse().apply(result.reconstruction.cloud())
-        points = points[np.all((points >= low) & (points <= high), axis=1)]
-        refinement = (0.0, 0.0)
-        if refine and len(points) >= 6:
-            fit = icp_to_mesh(points, index, max_distance=_ICP_MAX_DISTANCE_M)
-            points = fit.cloud2mesh.apply(points)
-            refinement = (fit.cloud2mesh.angle_deg, float(np.linalg.norm(fit.cloud2mesh.t)) * 1e3)
+        name = f"view_{k}/{VIEW_FILE}"
+        run.own(name)
+        if run.resumed and run.file(name).is_file():
+            points, refinement = _load_view(run.file(name), object2cam, episode)
+            run.log(f"reused view {k}")
+        else:
+            start = time.perf_counter()
+            placed = MeshObject(path=mesh_path, scale_to_m=scale, pose=object2cam)
+            result = scan_into(run, f"view_{k}", Scene(objects=(placed,)), scanner, rig, settings)
+            timing["scan_s"] += time.perf_counter() - start
+            start = time.perf_counter()
+            points = object2cam.inverse().apply(result.reconstruction.cloud())
+            points = points[np.all((points >= low) & (points <= high), axis=1)]
+            refinement = (0.0, 0.0)
+            if refine and len(points) >= 6:
+                fit = icp_to_mesh(points, index, max_distance=_ICP_MAX_DISTANCE_M)
+                points = fit.cloud2mesh.apply(points)
+                refinement = (
+                    fit.cloud2mesh.angle_deg, float(np.linalg.norm(fit.cloud2mesh.t)) * 1e3
+                )  # fmt: skip
+            timing["merge_s"] += time.perf_counter() - start
+            arrays = {
+                "points": points,
+                "object2cam": object2cam.matrix,
+                "refinement": np.array(refinement, dtype=np.float64),
+                "episode": np.array(episode),
+            }
+            run.write(name, lambda tmp, arrays=arrays: np.savez(tmp, **arrays))
+            run.log(f"scanned view {k}")
         clouds.append(points)
         counts.append(int(len(points)))
         refinements.append(refinement)
-        timing["merge_s"] += time.perf_counter() - start
     merged = np.concatenate(clouds)
     if len(merged) == 0:
         raise VirtusError("turntable: no view saw the object")
@@ -184,11 +282,15 @@ def turntable_scan(
     start = time.perf_counter()
     c2m = cloud_to_mesh(merged, index, max_distance=_ICP_MAX_DISTANCE_M)
     timing["evaluate_s"] = time.perf_counter() - start
-    ply = write_ply(
-        root / "merged.ply",
-        merged,
-        frame="object",
-        comments=(f"virtus turntable, {n_views} views merged in the object frame",),
+    run.own("merged.ply", "turntable.json")
+    ply = run.write(
+        "merged.ply",
+        lambda tmp: write_ply(
+            tmp,
+            merged,
+            frame="object",
+            comments=(f"virtus turntable, {len(poses)} views merged in the object frame",),
+        ),
     )
     result = TurntableResult(merged, counts, poses, refinements, c2m, ply, timing)
     report = result.to_dict()
@@ -196,5 +298,28 @@ def turntable_scan(
     report["scanner"] = scanner.to_dict()
     report["refine"] = refine
     report["mesh"] = str(mesh_path)
-    write_json(root / "turntable.json", report)
+    run.write_json("turntable.json", report)
     return result
+
+
+def _load_view(path: Path, object2cam: Pose, episode: str) -> tuple[np.ndarray, tuple]:
+    """A finished view's points and refinement, checked to belong to this run and pose."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {key: data[key] for key in data.files}
+    except (OSError, ValueError, KeyError, EOFError) as error:
+        raise VirtusError(f"{path}: not a readable view file ({error})") from None
+    points = arrays.get("points")
+    if (
+        str(arrays.get("episode", "")) != episode
+        or not np.array_equal(arrays.get("object2cam"), object2cam.matrix)
+        or points is None
+        or points.ndim != 2
+        or points.shape[1:] != (3,)
+    ):
+        raise VirtusError(
+            f"{path} was made by another turntable configuration or view; remove it or start "
+            "again with --overwrite"
+        )
+    refinement = tuple(float(x) for x in arrays.get("refinement", (0.0, 0.0)))
+    return points.astype(np.float64), refinement

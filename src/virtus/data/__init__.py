@@ -1,0 +1,41 @@
+"""Synthetic FPP datasets at scale: configuration, randomisation, Zarr store, loaders.
+
+One concept per module:
+
+* :mod:`virtus.data.config` -- the validated configuration (:class:`DatasetConfig`,
+  :func:`load_config`; YAML schema in its docstring).
+* :mod:`virtus.data.sampling` -- domain randomisation: sample ``i`` from
+  ``(seed, i, config)`` only; splits by object (:class:`Randomiser`).
+* :mod:`virtus.data.labels` -- the arrays of a sample, labels exact from the ground truth.
+* :mod:`virtus.data.store` -- the sharded Zarr v3 (or PNG) store and its manifest
+  (:class:`DatasetStore`; layout in its docstring).
+* :mod:`virtus.data.generate` -- rendering missing shards here, in processes or on Ray
+  (:func:`generate`), resumable after any interruption.
+* :mod:`virtus.data.loaders` -- :class:`FringeDataset` (PyTorch map-style; torch optional).
+* :mod:`virtus.data.export` -- WebDataset tar shards (:func:`export_webdataset`).
+
+Example::
+
+    from virtus.data import FringeDataset, generate, load_config
+
+    generate(load_config("examples/datasets/training.yaml"), "out/train.zarr", num=100)
+    dataset = FringeDataset("out/train.zarr", split="train")
+    item = dataset[0]               # dict of tensors: frames, depth (m), phase (2, H, W) rad, ...
+"""
+
+from virtus.data.config import DatasetConfig, load_config
+from virtus.data.export import export_webdataset
+from virtus.data.generate import GenerateReport, generate
+from virtus.data.loaders import FringeDataset
+from virtus.data.store import DatasetStore, VerifyReport
+
+__all__ = [
+    "DatasetConfig",
+    "DatasetStore",
+    "FringeDataset",
+    "GenerateReport",
+    "VerifyReport",
+    "export_webdataset",
+    "generate",
+    "load_config",
+]

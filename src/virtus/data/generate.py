@@ -1,0 +1,343 @@
+"""Dataset generation: render the missing shards of a store, here, in worker processes or on Ray.
+
+:func:`generate` is the library function behind ``virtus dataset generate``:
+
+1. Everything that can be refused is checked before any rendering: the configuration
+   (:mod:`virtus.data.config`), the candidate sequences, sensors, projectors and object
+   instances (:class:`~virtus.data.sampling.Randomiser`), the output folder (writable; empty,
+   new, or a store of the same configuration) and the sizes (samples, workers, shard
+   memory).
+2. Under the output folder's lock (:func:`virtus.runs.directory_lock`: one generating
+   process at a time), the store is created or extended (:meth:`DatasetStore.prepare`) and
+   its manifest says which shards are missing.
+3. Each missing shard is one task, :func:`render_shard`: render its samples
+   (:meth:`virtus.scanner.Scanner.capture`), make their labels
+   (:func:`~virtus.data.labels.sample_arrays`), write the shard and then its record. A task
+   depends only on the store path and the shard number, so it is idempotent: a retried or
+   repeated task writes the same bytes. Tasks run in this process (``workers=1``), in
+   ``workers`` spawned processes (each owns the shards it is given), or as Ray tasks.
+
+Rerunning the same command after an interruption (even ``kill -9``) renders only the
+shards without a record; the store ends byte for byte as an uninterrupted run leaves it.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import time
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from virtus import __version__
+from virtus.data.config import MAX_SHARD_BYTES, MAX_WORKERS, DatasetConfig
+from virtus.data.labels import array_layout, sample_arrays
+from virtus.data.sampling import Randomiser, SampleSpec
+from virtus.data.store import ASSETS_DIR, DatasetStore
+from virtus.errors import InputError
+from virtus.runs import directory_lock, file_digest
+
+__all__ = ["GenerateReport", "generate", "input_digests", "render_shard", "sample_meta"]
+
+#: Images up to this many pixels are synthesised on one thread (thread start-up would
+#: cost more than the work).
+_SMALL_IMAGE_PIXELS = 128 * 128
+#: Progress callback: (complete samples, target samples, samples rendered by this run).
+Progress = Callable[[int, int, int], None]
+
+
+@dataclass
+class GenerateReport:
+    """What a :func:`generate` call did.
+
+    Attributes
+    ----------
+    path : the store.
+    num_samples : samples requested.
+    complete : samples of ``[0, num_samples)`` complete at the end.
+    rendered : samples rendered by this call (0 when the store was already complete).
+    seconds : wall time of the rendering phase.
+    timing_s : seconds per stage summed over the shards rendered here (``render``,
+        ``labels``, ``write``: compression and I/O), across all workers.
+    """
+
+    path: Path
+    num_samples: int
+    complete: int
+    rendered: int
+    seconds: float
+    timing_s: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "path": str(self.path),
+            "num_samples": self.num_samples,
+            "complete": self.complete,
+            "rendered": self.rendered,
+            "seconds": self.seconds,
+            "samples_per_s": self.rendered / self.seconds if self.seconds > 0 else None,
+            "timing_s": self.timing_s,
+        }
+
+
+def input_digests(config: DatasetConfig) -> dict[str, str]:
+    """``path -> "sha256:..."`` of every input file the configuration reads (rig, sensor,
+    projector and sequence files, mesh files): part of a store's identity, so a changed
+    file is never mixed into an existing dataset."""
+    files: list[str] = []
+    if config.rig_file:
+        files.append(config.rig_file)
+    files += [s for s in (*config.sensors, *config.projectors) if os.path.sep in s]
+    files += list(config.fringes.sequences)
+    for source in config.sources:
+        if source.type == "mesh_folder":
+            files += [str(source.path / name) for name in source.files]  # type: ignore[operator]
+    return {path: file_digest(path) for path in files}
+
+
+def _identity(config: DatasetConfig) -> dict[str, Any]:
+    return {
+        "config": config.identity(),
+        "inputs": input_digests(config),
+        "virtus_version": __version__,
+    }
+
+
+def sample_meta(spec: SampleSpec, capture: Any) -> dict[str, Any]:
+    """The JSON-ready record of one sample: everything needed to triangulate it again
+    (rig, cam2world, sequence) and to render it again (scanner, seed, objects)."""
+    scanner = spec.scanner
+    return {
+        "index": spec.index,
+        "group": spec.group,
+        "split": spec.split,
+        "seed": spec.capture_seed,
+        "n_frames": len(scanner.sequence),
+        "bit_depth": capture.bit_depth,
+        "rig": scanner.rig.to_dict(),
+        "cam2world": spec.cam2world.to_dict(),
+        "sequence": scanner.sequence.to_dict(),
+        "sensor": scanner.sensor.to_dict(),
+        "projector": scanner.projector.to_dict(),
+        "scanner": {"spp": scanner.spp, "bounces": scanner.bounces},
+        "render": capture.render,
+        "objects": [o.to_dict() for o in spec.objects],
+        "info": spec.info,
+    }
+
+
+@functools.lru_cache(maxsize=4)
+def _randomiser(path: str, digest: str) -> Randomiser:
+    """The randomiser of a store (built once per process and dataset: sequences, sensors,
+    instance tables)."""
+    config = DatasetConfig.from_dict(DatasetStore.open(path).description["config"])
+    return Randomiser(config, Path(path) / ASSETS_DIR)
+
+
+def render_shard(
+    path: str | Path,
+    shard: int,
+    num_samples: int,
+    digest: str,
+    on_sample: Callable[[], None] | None = None,
+) -> dict[str, Any]:
+    """Render, label and write one shard (a task: idempotent, any process may run it).
+
+    Parameters
+    ----------
+    path : the store (already prepared).
+    shard : the shard number.
+    num_samples : the dataset size this run targets (the last shard may be partial).
+    digest : the store's identity digest (a task for another dataset is refused).
+    on_sample : called after each sample is rendered (progress in this process).
+
+    Returns
+    -------
+    ``{"shard", "samples", "timing_s": {"render", "labels", "write"}}``.
+    """
+    store = DatasetStore.open(path)
+    if store.digest != digest:
+        raise InputError("store", f"the dataset {digest}", store.digest)
+    randomiser = _randomiser(str(path), digest)
+    start, stop = store.shard_bounds(shard, num_samples)
+    cam = randomiser.rig.camera.intrinsics
+    threads = 1 if cam.width * cam.height <= _SMALL_IMAGE_PIXELS else None
+    timing = {"render": 0.0, "labels": 0.0, "write": 0.0}
+    samples, metas = [], []
+    for index in range(start, stop):
+        t0 = time.perf_counter()
+        spec = randomiser.sample(index)
+        capture = spec.scanner.capture(
+            spec.scene, cam2world=spec.cam2world, rng=spec.capture_seed, command=[],
+            threads=threads,
+        )  # fmt: skip
+        capture.frames  # noqa: B018 - rendered frames are materialised here (timing)
+        t1 = time.perf_counter()
+        samples.append(sample_arrays(capture, spec, store.layout))
+        metas.append(sample_meta(spec, capture))
+        t2 = time.perf_counter()
+        timing["render"] += t1 - t0
+        timing["labels"] += t2 - t1
+        if on_sample is not None:
+            on_sample()
+    t3 = time.perf_counter()
+    store.write_shard(shard, samples, metas)
+    timing["write"] += time.perf_counter() - t3
+    return {"shard": shard, "samples": stop - start, "timing_s": timing}
+
+
+def _worker_init() -> None:
+    """In a spawned worker: die with the parent (Linux), so a killed ``generate`` leaves no
+    orphan writing into the store."""
+    try:
+        import ctypes
+        import signal
+
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+def _run_local(
+    path: Path, shards: list[int], num: int, digest: str, workers: int, tick: Callable
+) -> Iterator[dict[str, Any]]:
+    if workers == 1:
+        for shard in shards:
+            yield render_shard(path, shard, num, digest, on_sample=lambda: tick(1))
+        return
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(workers, mp_context=context, initializer=_worker_init) as pool:
+        pending = set()
+        queue = iter(shards)
+        for shard in queue:
+            pending.add(pool.submit(render_shard, str(path), shard, num, digest))
+            if len(pending) >= 2 * workers:
+                break
+        while pending:
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for future in done:
+                result = future.result()
+                tick(result["samples"])
+                yield result
+                nxt = next(queue, None)
+                if nxt is not None:
+                    pending.add(pool.submit(render_shard, str(path), nxt, num, digest))
+
+
+def _run_ray(
+    path: Path, shards: list[int], num: int, digest: str, address: str, workers: int,
+    tick: Callable,
+) -> Iterator[dict[str, Any]]:  # fmt: skip
+    try:
+        import ray
+    except ImportError:
+        raise InputError(
+            "--ray", "Ray installed (pip install 'virtus-fpp[data]' or ray)", "no ray module"
+        ) from None
+    if not ray.is_initialized():
+        ray.init(address=None if address == "local" else address, log_to_driver=False)
+    task = ray.remote(num_cpus=1, max_retries=3)(render_shard)
+    in_flight = max(2 * workers, 2 * int(ray.cluster_resources().get("CPU", 1)))
+    queue: Iterable[int] = iter(shards)
+    first = [s for _, s in zip(range(in_flight), queue, strict=False)]
+    pending = [task.remote(str(path), s, num, digest) for s in first]
+    while pending:
+        done, pending = ray.wait(pending, num_returns=1)
+        result = ray.get(done[0])
+        tick(result["samples"])
+        yield result
+        nxt = next(queue, None)  # type: ignore[call-overload]
+        if nxt is not None:
+            pending.append(task.remote(str(path), nxt, num, digest))
+
+
+def generate(
+    config: DatasetConfig,
+    out: str | Path,
+    *,
+    num: int | None = None,
+    workers: int = 1,
+    ray: str | None = None,
+    storage: str = "zarr",
+    progress: Progress | None = None,
+) -> GenerateReport:
+    """Generate (or complete) a dataset store.
+
+    Parameters
+    ----------
+    config : the configuration.
+    out : the store folder (created; or an existing store of the same configuration,
+        which is completed or extended to ``num`` samples).
+    num : samples (default ``config.num_samples``), at most
+        :data:`~virtus.data.config.MAX_SAMPLES`.
+    workers : local worker processes (1: this process), at most
+        :data:`~virtus.data.config.MAX_WORKERS`; with Ray, the tasks kept in flight per CPU.
+    ray : None (local), ``"auto"`` (the running Ray cluster), ``"local"`` (start one here)
+        or a cluster address; a Ray session already initialised in this process is used.
+    storage : ``"zarr"`` (sharded Zarr v3) or ``"png"`` (per-sample folders).
+    progress : called with (complete, target, rendered by this call) as samples finish.
+
+    Raises
+    ------
+    InputError, VirtusError, OSError : bad configuration or sizes, an output folder that
+        is not writable, not empty or a store of another configuration -- all before any
+        sample is rendered.
+    """
+    config = config.with_num_samples(num)
+    if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= MAX_WORKERS:
+        raise InputError("workers", f"an integer in 1..{MAX_WORKERS}", workers)
+    out = Path(out)
+    randomiser = Randomiser(config, out / ASSETS_DIR)
+    cam = randomiser.rig.camera.intrinsics
+    layout = array_layout(
+        randomiser.max_frames, cam.height, cam.width, randomiser.bit_depth, config.label_dtype
+    )
+    shard_bytes = config.shard_samples * sum(a.nbytes for a in layout)
+    if shard_bytes > MAX_SHARD_BYTES:
+        raise InputError(
+            "storage.shard_samples",
+            f"shards of at most {MAX_SHARD_BYTES >> 20} MiB in memory",
+            f"{config.shard_samples} samples x {sum(a.nbytes for a in layout) >> 20} MiB",
+        )
+    if out.exists() and not out.is_dir():
+        raise InputError("--out", "a folder (new, empty, or a dataset store)", f"a file {out}")
+    with directory_lock(out):
+        store = DatasetStore.prepare(
+            out,
+            config=config.to_dict(),
+            identity=_identity(config),
+            layout=layout,
+            storage=storage,
+            num_samples=config.num_samples,
+        )
+        target = config.num_samples
+        todo = store.missing_shards(target)
+        todo_samples = sum(b - a for a, b in (store.shard_bounds(s, target) for s in todo))
+        complete = target - todo_samples
+        counter = {"complete": complete, "rendered": 0}
+
+        def tick(count: int) -> None:
+            counter["complete"] += count
+            counter["rendered"] += count
+            if progress is not None:
+                progress(counter["complete"], target, counter["rendered"])
+
+        if progress is not None:
+            progress(complete, target, 0)
+        timing = {"render": 0.0, "labels": 0.0, "write": 0.0}
+        start = time.perf_counter()
+        if ray is None:
+            results = _run_local(out, todo, target, store.digest, workers, tick)
+        else:
+            results = _run_ray(out, todo, target, store.digest, ray, workers, tick)
+        for result in results:
+            for stage, seconds in result["timing_s"].items():
+                timing[stage] += seconds
+        seconds = time.perf_counter() - start
+        complete = sum(1 for i in store.samples() if i < target)
+    return GenerateReport(out, target, complete, counter["rendered"], seconds, timing)

@@ -1,0 +1,491 @@
+"""The dataset store: sharded arrays plus a manifest that is the only record of completeness.
+
+Layout of a store directory ``STORE`` (format :data:`STORE_FORMAT`)::
+
+    STORE/dataset.json              what the store holds: format, storage (zarr | png),
+                                    the configuration (canonical), the identity (config
+                                    without num_samples + input file digests + virtus
+                                    version) and its digest, the array layout (names,
+                                    per-sample shapes, dtypes, units, fills), units,
+                                    num_samples (the latest requested)
+    STORE/manifest/shard_000012.json  one record per finished shard, written atomically
+                                    after the shard's data: format, dataset digest, shard,
+                                    and per sample: index, split, group, seed, checksum,
+                                    n_frames, rig, cam2world, scanner (sequence, sensor,
+                                    projector, spp, bounces), render settings, objects,
+                                    mode details
+    STORE/assets/                   generated meshes (free-form objects), STL, metres
+    STORE/.virtus.lock              held by the generating process
+
+    storage "zarr": STORE is a Zarr v3 group; one array per layout entry (see
+    virtus.data.labels), shape (N, *per-sample shape), chunks of one sample,
+    shards of ``shard_samples`` samples (the write unit):
+    STORE/zarr.json, STORE/<name>/zarr.json, STORE/<name>/c/<shard>/0/...
+
+    storage "png": STORE/samples/000123/frames/000.png ... (the sample's own n_frames
+    frames, 8- or 16-bit PNG) and STORE/samples/000123/<name>.npy for every label.
+
+**Completeness.** A sample exists when, and only when, the record of its shard lists it
+and the record carries this store's dataset digest. A writer owns whole shards: it
+renders all the shard's samples, writes each array's shard at once (Zarr's local store
+replaces files atomically; a PNG sample folder is renamed into place), then writes the
+record. A process killed at any moment leaves either a complete, recorded shard or one
+without a record, which the next run writes again with the same bytes (samples are
+deterministic), so nothing is duplicated or half-written.
+
+**Checksums.** Each sample's checksum (:func:`virtus.data.labels.sample_checksum`) covers
+its arrays as stored; :meth:`DatasetStore.verify` reads every sample back and compares.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from virtus import __version__
+from virtus.data.labels import ArraySpec, sample_checksum
+from virtus.errors import InputError, VirtusError
+from virtus.runs import config_digest, first_difference, write_json_atomic
+from virtus.safeio import read_json
+
+__all__ = [
+    "DESCRIPTION_FILE",
+    "MANIFEST_DIR",
+    "SHARD_FORMAT",
+    "STORAGES",
+    "STORE_FORMAT",
+    "DatasetStore",
+    "VerifyReport",
+]
+
+#: Format tags of ``dataset.json`` and of a shard record.
+STORE_FORMAT = "virtus.dataset/1"
+SHARD_FORMAT = "virtus.dataset_shard/1"
+#: Storage back-ends.
+STORAGES = ("zarr", "png")
+DESCRIPTION_FILE = "dataset.json"
+MANIFEST_DIR = "manifest"
+ASSETS_DIR = "assets"
+SAMPLES_DIR = "samples"
+#: Units recorded in ``dataset.json``.
+UNITS = {
+    "length": "m",
+    "frame": "camera frame (OpenCV: x right, y down, z forward)",
+    "proj_uv": "projector px (pixel-centre convention)",
+    "phase": "rad",
+    "frames": "digital numbers",
+}
+#: Largest shard record read (bytes): ~10 kB of metadata per sample, 1024 samples.
+_MAX_RECORD_BYTES = 64 << 20
+#: Files a store may hold besides its own (checked before a directory becomes a store).
+_IGNORED = (".virtus.lock", ".virtus-tmp")
+
+
+def _codec(name: str, level: int) -> Any:
+    from zarr.codecs import BloscCodec, ZstdCodec
+
+    if name == "none":
+        return None
+    if name == "zstd":
+        return ZstdCodec(level=level)
+    cname = name.removeprefix("blosc-")
+    return BloscCodec(cname=cname, clevel=level, shuffle="shuffle")
+
+
+@dataclass
+class VerifyReport:
+    """What :meth:`DatasetStore.verify` found.
+
+    Attributes
+    ----------
+    checked : samples read back and checksummed.
+    bad : ``(index, problem)`` of samples whose data does not match their checksum or
+        cannot be read.
+    missing : sample indices in ``[0, num_samples)`` without a record.
+    stray : leftover temporary files (from a killed writer; harmless, removed by the
+        next ``generate``).
+    """
+
+    checked: int = 0
+    bad: list[tuple[int, str]] = field(default_factory=list)
+    missing: list[int] = field(default_factory=list)
+    stray: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        """No bad sample and none missing."""
+        return not self.bad and not self.missing
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "ok": self.ok,
+            "checked": self.checked,
+            "bad": [list(b) for b in self.bad],
+            "missing": self.missing,
+            "stray": self.stray,
+        }
+
+
+class DatasetStore:
+    """A dataset store on disk (module docstring for the layout).
+
+    Use :meth:`open` to read one and :meth:`prepare` (the generator) to create or extend
+    one. Reading arrays opens them lazily, once per process.
+    """
+
+    def __init__(self, path: str | Path, description: dict[str, Any]) -> None:
+        self.path = Path(path)
+        self.description = description
+        self.layout = tuple(ArraySpec.from_dict(a) for a in description["layout"])
+        self.storage: str = description["storage"]
+        self.shard_samples: int = int(description["config"]["storage"]["shard_samples"])
+        self.digest: str = description["identity_digest"]
+        self._arrays: dict[str, Any] = {}
+        self._pid = os.getpid()
+
+    # -- opening --------------------------------------------------------------------------
+
+    @classmethod
+    def open(cls, path: str | Path) -> DatasetStore:
+        """Open an existing store.
+
+        Raises
+        ------
+        InputError : ``path`` holds no ``dataset.json`` or one of another format.
+        """
+        path = Path(path)
+        file = path / DESCRIPTION_FILE
+        if not file.is_file():
+            raise InputError(
+                "store", f"a dataset store (a folder with {DESCRIPTION_FILE})", str(path)
+            )
+        data = read_json(file, "dataset description", expect=dict)
+        if data.get("format") != STORE_FORMAT:
+            raise InputError(f"{file} format", STORE_FORMAT, data.get("format"))
+        return cls(path, data)
+
+    @classmethod
+    def prepare(
+        cls,
+        path: str | Path,
+        *,
+        config: dict[str, Any],
+        identity: dict[str, Any],
+        layout: tuple[ArraySpec, ...],
+        storage: str,
+        num_samples: int,
+    ) -> DatasetStore:
+        """Create the store, or reopen one made with the same identity and extend it.
+
+        Call it holding the directory's lock. Nothing is rendered here; the arrays are
+        created (or resized) so that ``num_samples`` fit.
+
+        Raises
+        ------
+        VirtusError : the folder holds something else, or a store made with another
+            configuration (the first difference is named).
+        OSError : the folder cannot be created or written.
+        """
+        path = Path(path)
+        if storage not in STORAGES:
+            raise InputError("format", f"one of {', '.join(STORAGES)}", storage)
+        file = path / DESCRIPTION_FILE
+        digest = config_digest(identity)
+        if file.is_file():
+            store = cls.open(path)
+            old = store.description.get("identity", {})
+            if store.digest != digest or store.storage != storage:
+                where = first_difference(
+                    {"storage": storage, **identity}, {"storage": store.storage, **old}
+                )
+                raise VirtusError(
+                    f"{path} holds a dataset made with another configuration ({where}); "
+                    "choose another --out or remove it"
+                )
+        elif path.exists() and any(p.name not in _IGNORED for p in path.iterdir()):
+            raise VirtusError(
+                f"{path} exists and is not a virtus dataset (no {DESCRIPTION_FILE}); choose a "
+                "new or empty folder"
+            )
+        previous = cls.open(path).description if file.is_file() else None
+        description = {
+            "format": STORE_FORMAT,
+            "virtus_version": __version__,
+            "storage": storage,
+            "units": UNITS,
+            "num_samples": num_samples,
+            "config": config,
+            "identity": identity,
+            "identity_digest": digest,
+            "layout": [a.to_dict() for a in layout],
+        }
+        if previous is not None:
+            description["num_samples"] = max(num_samples, int(previous["num_samples"]))
+        store = cls(path, description)
+        # dataset.json first: it claims the folder, so a run killed while the arrays are
+        # being created is resumed (creation is idempotent) rather than refused.
+        if previous != description:
+            write_json_atomic(file, description)
+        (path / MANIFEST_DIR).mkdir(exist_ok=True)
+        (path / ASSETS_DIR).mkdir(exist_ok=True)
+        store._remove_strays()
+        if storage == "zarr":
+            store._zarr_create(description["num_samples"], config["storage"])
+        return store
+
+    # -- shards and the manifest ----------------------------------------------------------
+
+    @property
+    def num_samples(self) -> int:
+        """Samples the store is meant to hold (the largest ``num_samples`` requested)."""
+        return int(self.description["num_samples"])
+
+    def shard_count(self, num_samples: int | None = None) -> int:
+        """Shards that hold ``num_samples`` (default: the store's)."""
+        num = self.num_samples if num_samples is None else num_samples
+        return -(-num // self.shard_samples)
+
+    def shard_bounds(self, shard: int, num_samples: int | None = None) -> tuple[int, int]:
+        """``(start, stop)`` sample indices of a shard."""
+        num = self.num_samples if num_samples is None else num_samples
+        start = shard * self.shard_samples
+        return start, min(start + self.shard_samples, num)
+
+    def _record_path(self, shard: int) -> Path:
+        return self.path / MANIFEST_DIR / f"shard_{shard:06d}.json"
+
+    def records(self) -> dict[int, dict[str, Any]]:
+        """Shard -> record, for every record of this dataset (others are ignored)."""
+        out = {}
+        folder = self.path / MANIFEST_DIR
+        if not folder.is_dir():
+            return out
+        for file in sorted(folder.glob("shard_*.json")):
+            try:
+                record = read_json(file, "shard record", expect=dict, max_bytes=_MAX_RECORD_BYTES)
+            except InputError:
+                continue  # never happens with atomic writes; verify reports the gap
+            if record.get("format") == SHARD_FORMAT and record.get("dataset") == self.digest:
+                out[int(record["shard"])] = record
+        return out
+
+    def samples(self) -> dict[int, dict[str, Any]]:
+        """Sample index -> its metadata (with ``shard``), for every complete sample."""
+        out = {}
+        for shard, record in self.records().items():
+            for meta in record["samples"]:
+                out[int(meta["index"])] = {**meta, "shard": shard}
+        return dict(sorted(out.items()))
+
+    def missing_shards(self, num_samples: int) -> list[int]:
+        """Shards of ``[0, num_samples)`` without a record listing all their samples."""
+        records = self.records()
+        todo = []
+        for shard in range(self.shard_count(num_samples)):
+            start, stop = self.shard_bounds(shard, num_samples)
+            have = {int(m["index"]) for m in records.get(shard, {}).get("samples", [])}
+            if not set(range(start, stop)) <= have:
+                todo.append(shard)
+        return todo
+
+    def write_shard(
+        self, shard: int, samples: list[dict[str, np.ndarray]], metas: list[dict[str, Any]]
+    ) -> None:
+        """Write one shard's samples (consecutive, from the shard's first index), then its
+        record. Each sample's ``checksum`` is computed here and added to its metadata."""
+        start = shard * self.shard_samples
+        if not samples or len(samples) > self.shard_samples or len(samples) != len(metas):
+            raise InputError(
+                "samples", f"1..{self.shard_samples} samples with metadata", len(samples)
+            )
+        for arrays, meta in zip(samples, metas, strict=True):
+            meta["checksum"] = sample_checksum(arrays, self.layout)
+        if self.storage == "zarr":
+            arrays = self._zarr_arrays()
+            for spec in self.layout:
+                block = np.stack([s[spec.name] for s in samples])
+                arrays[spec.name][start : start + len(samples)] = block
+        else:
+            for offset, (arrays, meta) in enumerate(zip(samples, metas, strict=True)):
+                self._png_write(start + offset, arrays, int(meta["n_frames"]))
+        record = {
+            "format": SHARD_FORMAT,
+            "dataset": self.digest,
+            "shard": shard,
+            "samples": metas,
+        }
+        write_json_atomic(self._record_path(shard), record)
+
+    # -- reading --------------------------------------------------------------------------
+
+    def read_sample(
+        self, index: int, names: tuple[str, ...] | None = None
+    ) -> dict[str, np.ndarray]:
+        """The arrays of sample ``index`` (all, or ``names``), as stored."""
+        wanted = [a for a in self.layout if names is None or a.name in names]
+        if names is not None and len(wanted) != len(set(names)):
+            known = [a.name for a in self.layout]
+            raise InputError("names", f"array names among {known}", list(names))
+        if self.storage == "zarr":
+            arrays = self._zarr_arrays()
+            return {a.name: np.asarray(arrays[a.name][index]) for a in wanted}
+        return {a.name: self._png_read(index, a) for a in wanted}
+
+    def _read_block(self, start: int, stop: int) -> dict[str, np.ndarray]:
+        """Every array of samples ``[start, stop)``, stacked (as stored)."""
+        if self.storage == "zarr":
+            arrays = self._zarr_arrays()
+            return {a.name: np.asarray(arrays[a.name][start:stop]) for a in self.layout}
+        samples = [self.read_sample(index) for index in range(start, stop)]
+        return {a.name: np.stack([s[a.name] for s in samples]) for a in self.layout}
+
+    def verify(self, progress: Callable[[int, int], None] | None = None) -> VerifyReport:
+        """Read every recorded sample back and compare its checksum; list missing samples
+        of ``[0, num_samples)`` and leftover temporary files."""
+        report = VerifyReport()
+        records = self.records()
+        samples = self.samples()
+        done = 0
+        for record in records.values():
+            metas = record["samples"]
+            indices = [int(m["index"]) for m in metas]
+            try:  # one read per array and shard (per-sample reads cost Zarr's overhead each)
+                blocks = self._read_block(min(indices), max(indices) + 1)
+            except Exception as error:  # a damaged shard: zarr/numcodecs raise many types
+                problem = f"unreadable: {type(error).__name__}: {error}"
+                report.bad += [(index, problem) for index in indices]
+                continue
+            for meta, index in zip(metas, indices, strict=True):
+                arrays = {name: block[index - min(indices)] for name, block in blocks.items()}
+                if sample_checksum(arrays, self.layout) != meta.get("checksum"):
+                    report.bad.append((index, "checksum mismatch"))
+                report.checked += 1
+                done += 1
+                if progress is not None:
+                    progress(done, len(samples))
+        report.bad.sort()
+        report.missing = [i for i in range(self.num_samples) if i not in samples]
+        report.stray = [str(p.relative_to(self.path)) for p in self._strays()]
+        return report
+
+    def info(self) -> dict[str, Any]:
+        """A JSON-ready summary: format, storage, mode, sizes, samples per split, disk use."""
+        samples = self.samples()
+        splits: dict[str, int] = {}
+        for meta in samples.values():
+            splits[meta["split"]] = splits.get(meta["split"], 0) + 1
+        frames = next(a for a in self.layout if a.name == "frames")
+        size = sum(p.stat().st_size for p in self.path.rglob("*") if p.is_file())
+        return {
+            "path": str(self.path),
+            "format": self.description["format"],
+            "storage": self.storage,
+            "mode": self.description["config"]["mode"],
+            "seed": self.description["config"]["seed"],
+            "num_samples": self.num_samples,
+            "complete": len(samples),
+            "splits": splits,
+            "shard_samples": self.shard_samples,
+            "frames": {
+                "max": frames.shape[0],
+                "height": frames.shape[1],
+                "width": frames.shape[2],
+                "dtype": frames.dtype,
+            },  # fmt: skip
+            "arrays": [a.name for a in self.layout],
+            "bytes_on_disk": size,
+            "identity_digest": self.digest,
+        }
+
+    # -- zarr -----------------------------------------------------------------------------
+
+    def _zarr_create(self, num: int, storage: dict[str, Any]) -> None:
+        import zarr
+
+        group = zarr.open_group(self.path, mode="a")
+        group.attrs.update({"virtus": {"format": STORE_FORMAT, "units": UNITS}})
+        compressor = _codec(storage["codec"], int(storage["level"]))
+        for spec in self.layout:
+            if spec.name in group:
+                array = group[spec.name]
+                if array.shape[0] < num:
+                    array.resize((num, *spec.shape))
+                continue
+            group.create_array(
+                spec.name,
+                shape=(num, *spec.shape),
+                chunks=(1, *spec.shape),
+                shards=(self.shard_samples, *spec.shape),
+                dtype=spec.dtype,
+                fill_value=spec.fill,
+                compressors=compressor if compressor is not None else None,
+                attributes={"unit": spec.unit, "channels": list(spec.channels)},
+            )
+        self._arrays = {}
+
+    def _zarr_arrays(self) -> dict[str, Any]:
+        import zarr
+
+        if not self._arrays or self._pid != os.getpid():
+            group = zarr.open_group(self.path, mode="r+")
+            self._arrays = {spec.name: group[spec.name] for spec in self.layout}
+            self._pid = os.getpid()
+        return self._arrays
+
+    # -- png ------------------------------------------------------------------------------
+
+    def _sample_dir(self, index: int) -> Path:
+        return self.path / SAMPLES_DIR / f"{index:06d}"
+
+    def _png_write(self, index: int, arrays: dict[str, np.ndarray], n_frames: int) -> None:
+        """Write a sample folder beside its place, then rename it into place."""
+        from virtus.images import write_frames
+
+        target = self._sample_dir(index)
+        staging = target.parent / f".tmp-{target.name}"
+        shutil.rmtree(staging, ignore_errors=True)
+        staging.mkdir(parents=True)
+        write_frames(staging / "frames", arrays["frames"][:n_frames], workers=1)
+        for spec in self.layout:
+            if spec.name != "frames":
+                np.save(staging / f"{spec.name}.npy", arrays[spec.name])
+        shutil.rmtree(target, ignore_errors=True)
+        os.replace(staging, target)
+
+    def _png_read(self, index: int, spec: ArraySpec) -> np.ndarray:
+        from virtus.images import list_images, read_images
+        from virtus.safeio import load_npy
+
+        folder = self._sample_dir(index)
+        if spec.name == "frames":
+            out = np.zeros(spec.shape, dtype=spec.dtype)
+            frames = read_images(list_images(folder / "frames"), workers=1)
+            out[: len(frames)] = frames
+            return out
+        return load_npy(folder / f"{spec.name}.npy", spec.name, dtype=spec.dtype, shape=spec.shape)
+
+    # -- housekeeping ---------------------------------------------------------------------
+
+    def _strays(self) -> list[Path]:
+        """Temporary files a killed writer may leave (Zarr's ``*.partial``, staging)."""
+        found = [p for p in self.path.rglob("*.partial")]
+        found += [p for p in self.path.rglob(".virtus-tmp")]
+        samples = self.path / SAMPLES_DIR
+        if samples.is_dir():
+            found += [p for p in samples.iterdir() if p.name.startswith(".tmp-")]
+        return sorted(found)
+
+    def _remove_strays(self) -> None:
+        for path in self._strays():
+            with contextlib.suppress(OSError):
+                if path.is_dir():
+                    shutil.rmtree(path)
+                else:
+                    path.unlink()
