@@ -65,6 +65,7 @@ def register(app: typer.Typer) -> None:
         )
 
         from virtus.pipeline.demo import run_demo
+        from virtus.scanner import Scanner
 
         scanner = build_scanner(
             rig=rig, sequence=sequence, lookup=lookup, projector=projector, spp=spp, sensor=sensor,
@@ -95,12 +96,31 @@ def register(app: typer.Typer) -> None:
                 overwrite=overwrite,
                 resume=resume and not overwrite,
             )
-        _print_table(console, result.metrics)
+            # With realism on, the same experiment with an ideal sensor and projector is run
+            # beside it (OUT/ideal/, its own run) and printed side by side.
+            ideal = Scanner(rig=scanner.rig, sequence=scanner.sequence, spp=scanner.spp,
+                            variant=scanner.variant)  # fmt: skip
+            reference = None
+            if scanner != ideal:
+                bar.update(task, description="ideal reference")
+                reference = run_demo(
+                    out / IDEAL_DIR, progress=progress, scanner=ideal, overwrite=overwrite,
+                    resume=resume and not overwrite,
+                ).metrics  # fmt: skip
+        _print_table(console, result.metrics, reference)
         console.print(f"wrote {out / 'metrics.json'}, {out / 'calibration' / 'calibration.json'}, "
                       f"{out / 'scan' / 'points.ply'}")  # fmt: skip
+        if reference is not None:
+            console.print(f"ideal reference: {out / IDEAL_DIR / 'metrics.json'}")
 
 
-def _print_table(console: Any, m: dict[str, Any]) -> None:
+#: Sub-directory of the ideal reference run when realism is on.
+IDEAL_DIR = "ideal"
+
+
+def _print_table(console: Any, m: dict[str, Any], ideal: dict[str, Any] | None = None) -> None:
+    """The demo's table; with ``ideal`` (the metrics of the same demo with an ideal sensor
+    and projector) an extra column shows what the realism costs."""
     from rich.table import Table
 
     cal, sph, ref, paper = m["calibration"], m["sphere"], m["sphere_true_rig"], m["paper"]
@@ -110,26 +130,37 @@ def _print_table(console: Any, m: dict[str, Any]) -> None:
         return "-" if value is None else format(value, spec)
 
     table = Table(title="virtus demo: 100 mm sphere reconstructed with calibrated parameters")
-    for column, justify in (("", "left"), ("virtus", "right"), ("paper", "right"),
-                            ("target", "right"), ("true rig", "right")):  # fmt: skip
-        table.add_column(column, justify=justify)  # type: ignore[arg-type]
-    table.add_row("camera reprojection RMS (px)", fmt(cal["camera_rms_px"], ".4f"),
-                  fmt(paper["camera_rms_px"], ".3f"), "", "")  # fmt: skip
-    table.add_row("projector reprojection RMS (px)", fmt(cal["projector_rms_px"], ".4f"),
-                  fmt(paper["projector_rms_px"], ".3f"), "", "")  # fmt: skip
-    table.add_row("stereo reprojection RMS (px)", fmt(cal["stereo_rms_px"], ".4f"),
-                  fmt(paper["stereo_rms_px"], ".3f"), "", "")  # fmt: skip
-    table.add_row("sphere radius (mm)", f"{sph['radius_mm']:.4f}", f"{paper['radius_mm']:.3f}",
-                  f"{sph['radius_true_mm']:.1f}", f"{ref['radius_mm']:.4f}")  # fmt: skip
-    table.add_row("radius error (mm)", f"{sph['radius_error_mm']:+.4f}",
-                  f"{-paper['radius_error_mm']:+.3f}",
-                  f"<= {targets['radius_error_mm']}", f"{ref['radius_error_mm']:+.4f}")  # fmt: skip
-    table.add_row("inlier ratio", f"{sph['inlier_ratio']:.2%}", f"{paper['inlier_ratio']:.1%}",
-                  f">= {targets['inlier_ratio']:.0%}", f"{ref['inlier_ratio']:.2%}")  # fmt: skip
-    table.add_row("fit RMS (mm)", f"{sph['fit_rms_mm']:.4f}", "-", "", f"{ref['fit_rms_mm']:.4f}")
-    table.add_row("points in the fit", str(sph["n_points"]), "-", "", "")
-    table.add_row("total time (s)", f"{timing['total_s']:.1f}", "-",
-                  f"<= {targets['total_s']:.0f}", "")  # fmt: skip
+    columns = ["", "virtus", "paper", "target", "true rig"]
+    if ideal is not None:
+        columns.append("ideal sensor")
+    for column in columns:
+        table.add_column(column, justify="left" if not column else "right")
+    i_cal = ideal["calibration"] if ideal else {}
+    i_sph = ideal["sphere"] if ideal else {}
+    rows = [
+        ("camera reprojection RMS (px)", fmt(cal["camera_rms_px"], ".4f"),
+         fmt(paper["camera_rms_px"], ".3f"), "", "", fmt(i_cal.get("camera_rms_px"), ".4f")),
+        ("projector reprojection RMS (px)", fmt(cal["projector_rms_px"], ".4f"),
+         fmt(paper["projector_rms_px"], ".3f"), "", "", fmt(i_cal.get("projector_rms_px"), ".4f")),
+        ("stereo reprojection RMS (px)", fmt(cal["stereo_rms_px"], ".4f"),
+         fmt(paper["stereo_rms_px"], ".3f"), "", "", fmt(i_cal.get("stereo_rms_px"), ".4f")),
+        ("sphere radius (mm)", f"{sph['radius_mm']:.4f}", f"{paper['radius_mm']:.3f}",
+         f"{sph['radius_true_mm']:.1f}", f"{ref['radius_mm']:.4f}",
+         fmt(i_sph.get("radius_mm"), ".4f")),
+        ("radius error (mm)", f"{sph['radius_error_mm']:+.4f}",
+         f"{-paper['radius_error_mm']:+.3f}", f"<= {targets['radius_error_mm']}",
+         f"{ref['radius_error_mm']:+.4f}", fmt(i_sph.get("radius_error_mm"), "+.4f")),
+        ("inlier ratio", f"{sph['inlier_ratio']:.2%}", f"{paper['inlier_ratio']:.1%}",
+         f">= {targets['inlier_ratio']:.0%}", f"{ref['inlier_ratio']:.2%}",
+         fmt(i_sph.get("inlier_ratio"), ".2%")),
+        ("fit RMS (mm)", f"{sph['fit_rms_mm']:.4f}", "-", "", f"{ref['fit_rms_mm']:.4f}",
+         fmt(i_sph.get("fit_rms_mm"), ".4f")),
+        ("points in the fit", str(sph["n_points"]), "-", "", "", str(i_sph.get("n_points", "-"))),
+        ("total time (s)", f"{timing['total_s']:.1f}", "-", f"<= {targets['total_s']:.0f}", "",
+         fmt(ideal["timing"]["total_s"] if ideal else None, ".1f")),
+    ]  # fmt: skip
+    for row in rows:
+        table.add_row(*row[: len(columns)])
     console.print(table)
     console.print(
         f"calibration {timing['calibration_s']:.1f} s, scan {timing['scan_s']:.1f} s, "
