@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from enum import Enum
+from typing import TypeVar
 
 import numpy as np
 
 from virtus.errors import InputError
+
+E = TypeVar("E", bound=Enum)
 
 
 def as_float_array(
@@ -91,3 +95,12 @@ def as_rng(rng: np.random.Generator | int | None) -> np.random.Generator:
     if rng is None or isinstance(rng, int | np.integer):
         return np.random.default_rng(rng)
     raise InputError("rng", "a numpy Generator, an int seed or None", rng)
+
+
+def as_member(enum: type[E], name: str, value: object) -> E:
+    """``value`` as a member of the string enum ``enum``, or :class:`InputError` naming
+    ``name`` and the allowed values."""
+    try:
+        return enum(value)
+    except ValueError:
+        raise InputError(name, f"one of {[m.value for m in enum]}", value) from None

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from virtus.checks import as_member
 from virtus.errors import InputError
 from virtus.safeio import check_keys
 
@@ -61,10 +62,7 @@ class Lookup(StrEnum):
 
 def as_lookup(value: object) -> Lookup:
     """``value`` as a :class:`Lookup`, or :class:`InputError` naming ``lookup``."""
-    try:
-        return Lookup(value)
-    except ValueError:
-        raise InputError("lookup", f"one of {[m.value for m in Lookup]}", value) from None
+    return as_member(Lookup, "lookup", value)
 
 
 def _number(name: str, value: object, low: float, high: float, *, open_low: bool = False) -> float:

@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from virtus.checks import as_float_array, as_points
+from virtus.checks import as_float_array, as_member, as_points
 from virtus.errors import InputError
 
 if TYPE_CHECKING:
@@ -47,6 +47,7 @@ __all__ = [
     "valid_points",
 ]
 
+
 class Use(StrEnum):
     """Which decoded projector coordinates constrain a triangulated point: ``uv`` (both:
     ray-ray least squares), ``u`` or ``v`` (one: ray-surface intersection)."""
@@ -58,10 +59,7 @@ class Use(StrEnum):
 
 def as_use(value: object) -> Use:
     """``value`` as a :class:`Use`, or :class:`InputError` naming ``use``."""
-    try:
-        return Use(value)
-    except ValueError:
-        raise InputError("use", f"one of {[m.value for m in Use]}", value) from None
+    return as_member(Use, "use", value)
 
 
 #: Rays closer to parallel than this (sine of the angle between them) are not intersected:

@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from virtus import __version__
+from virtus.capture import UNITS as CAPTURE_UNITS
 from virtus.data.labels import ArraySpec, sample_checksum
 from virtus.errors import InputError, VirtusError
 from virtus.runs import config_digest, first_difference, write_json_atomic
@@ -74,14 +75,8 @@ DESCRIPTION_FILE = "dataset.json"
 MANIFEST_DIR = "manifest"
 ASSETS_DIR = "assets"
 SAMPLES_DIR = "samples"
-#: Units recorded in ``dataset.json``.
-UNITS = {
-    "length": "m",
-    "frame": "camera frame (OpenCV: x right, y down, z forward)",
-    "proj_uv": "projector px (pixel-centre convention)",
-    "phase": "rad",
-    "frames": "digital numbers",
-}
+#: Units recorded in ``dataset.json``: those of a capture.
+UNITS = CAPTURE_UNITS
 #: Largest shard record read (bytes): ~10 kB of metadata per sample, 1024 samples.
 _MAX_RECORD_BYTES = 64 << 20
 #: Files a store may hold besides its own (checked before a directory becomes a store).
