@@ -20,6 +20,8 @@ lengths in metres, camera frame; projector coordinates in projector pixels)::
     DIR/gt/proj_uv.npy      (H, W, 2) float64 projector pixels (u_p, v_p)
     DIR/gt/mask.npy         (H, W) bool: hit, lit by the projector, inside its image
     DIR/gt/mask_hit.npy, mask_shadow.npy, mask_outside.npy   (H, W) bool
+    DIR/gt/mask_multibounce.npy (H, W) bool: indirect light outweighs direct light
+    DIR/gt/mask_saturated.npy   (H, W) bool: full scale (ADC or full well) in some frame
     DIR/scene_assets/       in-memory textures of the scene, as .npy (if any)
 
 Format ``virtus.capture/1`` (virtus 0.1) is read too: it has no ``cam2world`` (identity),

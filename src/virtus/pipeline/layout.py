@@ -16,8 +16,10 @@ A scan directory is a capture directory (the layout of ``virtus capture``: frame
     DIR/reconstruction/depth.npy   (H, W) float64 camera-frame z, metres, NaN invalid
     DIR/reconstruction/mask.npy    (H, W) bool, pixels with a point
     DIR/reconstruction/rig.json    the rig the points were triangulated with (rig schema)
+    DIR/reconstruction/source.json the checksums of the capture, the rig and points.ply: a
+                                   reconstruction of other inputs is stale
     DIR/points.ply              binary PLY, metres, camera frame, with normals
-    DIR/evaluation.json         C2M (``virtus evaluate``)
+    DIR/evaluation.json         C2M, with the SHA-256 of the cloud it measured (``virtus evaluate``)
 """
 
 from __future__ import annotations
