@@ -468,11 +468,6 @@ def _inside(directory: Path, name: object, what: str) -> Path:
     return directory / name
 
 
-def load_capture(directory: str | Path) -> Capture:
-    """Read a capture directory (:meth:`Capture.load`)."""
-    return Capture.load(directory)
-
-
 def import_capture(
     images: str | Path | list[str | Path],
     sequence: PatternSequence,

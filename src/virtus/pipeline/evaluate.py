@@ -135,10 +135,10 @@ def evaluate_scan(
         The scene has no mesh object; the PLY is missing, not a PLY, empty or stale; the
         directory is in use by another run.
     """
-    from virtus.capture import load_capture
+    from virtus.capture import Capture
 
     directory = Path(scan_dir)
-    capture = load_capture(directory)
+    capture = Capture.load(directory)
     if capture.scene is None:
         raise VirtusError(f"evaluate: {directory}/capture.json holds no scene to compare with")
     meshes = scene_meshes(capture.scene)
