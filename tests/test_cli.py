@@ -57,3 +57,19 @@ def test_rig_info_json_reads_back_as_the_default_rig(capsys):
     assert data["isaac"]["focal_length"] == pytest.approx(50.0)  # the paper's Isaac camera
     size = data["projected_size_m"]
     assert (size["width"], size["height"]) == pytest.approx((0.5, 0.625))
+
+
+def test_patterns_writes_any_sequence_it_is_given(tmp_path, capsys) -> None:
+    from pathlib import Path
+
+    from virtus.patterns import load_sequence_file
+
+    example = (
+        Path(__file__).resolve().parents[1] / "examples" / "sequences" / "lightcrafter_lab.yaml"
+    )
+    with pytest.raises(SystemExit) as exit_info:
+        main(["patterns", "--sequence", str(example), "--out", str(tmp_path / "p")])
+    assert exit_info.value.code == 0, capsys.readouterr().err
+    written, _ = load_sequence_file(tmp_path / "p" / "sequence.json")
+    assert written == load_sequence_file(example)[0]
+    assert len(list((tmp_path / "p").glob("*.png"))) == 52

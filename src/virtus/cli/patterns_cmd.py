@@ -1,4 +1,4 @@
-"""``virtus patterns``: write the default fringe sequence as 8-bit PNGs plus ``sequence.json``."""
+"""``virtus patterns``: write a fringe sequence as 8-bit PNGs plus ``sequence.json``."""
 
 from __future__ import annotations
 
@@ -7,26 +7,37 @@ from typing import Annotated
 
 import typer
 
+from virtus.cli.options import SequenceOption
+
 
 def register(app: typer.Typer) -> None:
     @app.command("patterns")
     def patterns(
         out: Annotated[Path, typer.Option(help="Output folder.")] = Path("patterns"),
-        width: Annotated[int, typer.Option(help="Projector width, px.")] = 912,
-        height: Annotated[int, typer.Option(help="Projector height, px.")] = 1140,
+        sequence: SequenceOption = None,
+        width: Annotated[
+            int, typer.Option(help="Projector width, px (the default sequence).")
+        ] = 912,
+        height: Annotated[
+            int, typer.Option(help="Projector height, px (the default sequence).")
+        ] = 1140,
     ) -> None:
-        """Write the paper's 52-frame sequence (18-step phase shift, T = 18 px, 6-bit Gray +
-        complementary, vertical and horizontal, white, black) as DIR/000.png ... and
-        DIR/sequence.json describing every frame."""
+        """Write a sequence's frames as DIR/000.png ... (what the projector shows, 8-bit) and
+        DIR/sequence.json, the description every job reads with --sequence. Default: the
+        paper's 52 frames (18-step phase shift, T = 18 px, 6-bit Gray + complementary,
+        vertical and horizontal, white, black); --sequence FILE writes that sequence."""
         from virtus.optics import Intrinsics
-        from virtus.patterns import default_sequence
+        from virtus.patterns import default_sequence, load_sequence_file
 
-        # The projector's size within the bounds of any device image (checked before the
-        # patterns are built or written).
-        Intrinsics(1.0, 1.0, 0.0, 0.0, width, height)
-        sequence = default_sequence(width, height)
-        path = sequence.save(out)
+        if sequence is not None:
+            the_sequence, _files = load_sequence_file(sequence)
+        else:
+            # The projector's size within the bounds of any device image (checked before the
+            # patterns are built or written).
+            Intrinsics(1.0, 1.0, 0.0, 0.0, width, height)
+            the_sequence = default_sequence(width, height)
+        path = the_sequence.save(out)
         typer.echo(
-            f"wrote {len(sequence)} frames ({sequence.width} x {sequence.height} px, 8-bit) "
-            f"and {path}"
+            f"wrote {len(the_sequence)} frames ({the_sequence.width} x {the_sequence.height} "
+            f"px, 8-bit) and {path}"
         )
