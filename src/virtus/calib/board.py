@@ -55,6 +55,21 @@ MM = 1e-3
 PAPER_BOARDS = ("4x7", "5x9", "7x13")
 
 
+
+def _edge_blur(coverage: np.ndarray, blur_m: float, step_x: float, step_y: float) -> np.ndarray:
+    """A board texture's dark-area coverage blurred by a Gaussian of ``blur_m`` metres
+    (texels of ``step_x`` x ``step_y`` m), so supersampling integrates its edges."""
+    if blur_m < 0:
+        raise InputError("blur_m", "a standard deviation >= 0 (m)", blur_m)
+    if blur_m == 0:
+        return coverage
+    import cv2
+
+    return cv2.GaussianBlur(
+        coverage, (0, 0), sigmaX=blur_m / step_x, sigmaY=blur_m / step_y,
+        borderType=cv2.BORDER_REPLICATE,
+    )  # fmt: skip
+
 @dataclass(frozen=True)
 class CircleBoard:
     """An asymmetric circle grid printed on a rectangular plane.
@@ -251,18 +266,7 @@ class CircleBoard:
             dy2 = (ys - cy) ** 2  # (nrows, ss)
             inside = dy2[:, None, :, None] + dx2[None, :, None, :] <= radius**2
             coverage[r0:r1, c0:c1] += inside.mean(axis=(2, 3))
-        if blur_m < 0:
-            raise InputError("blur_m", "a standard deviation >= 0 (m)", blur_m)
-        if blur_m > 0:
-            import cv2
-
-            coverage = cv2.GaussianBlur(
-                coverage,
-                (0, 0),
-                sigmaX=blur_m / step_x,
-                sigmaY=blur_m / step_y,
-                borderType=cv2.BORDER_REPLICATE,
-            )
+        coverage = _edge_blur(coverage, blur_m, step_x, step_y)
         levels = self.background_level + (self.circle_level - self.background_level) * coverage
         return levels.astype(np.float32)
 
@@ -434,18 +438,7 @@ class CheckerBoard:
         fy = _cell_fractions(height, height_m, self.rows + 1, s)
         # dark squares: even + even or odd + odd cell indices
         coverage = np.outer(fy[0], fx[0]) + np.outer(fy[1], fx[1])
-        if blur_m < 0:
-            raise InputError("blur_m", "a standard deviation >= 0 (m)", blur_m)
-        if blur_m > 0:
-            import cv2
-
-            coverage = cv2.GaussianBlur(
-                coverage,
-                (0, 0),
-                sigmaX=blur_m / (width_m / width),
-                sigmaY=blur_m / (height_m / height),
-                borderType=cv2.BORDER_REPLICATE,
-            )
+        coverage = _edge_blur(coverage, blur_m, width_m / width, height_m / height)
         levels = self.light_level + (self.dark_level - self.light_level) * coverage
         return levels.astype(np.float32)
 

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from virtus.cli.options import RigOption, SeedOption, SppOption, build_scanner
+from virtus.cli.options import OverwriteOption, RigOption, SeedOption, SppOption, build_scanner
 
 
 def _names(text: str | None) -> list[str] | None:
@@ -35,10 +35,7 @@ def register(app: typer.Typer) -> None:
         rig: RigOption = None,
         spp: SppOption = 4,
         seed: SeedOption = 0,
-        overwrite: Annotated[
-            bool,
-            typer.Option("--overwrite", help="Remove an earlier run's files in OUT first."),
-        ] = False,
+        overwrite: OverwriteOption = False,
         resume: Annotated[
             bool,
             typer.Option(

@@ -12,6 +12,7 @@ import typer
 from virtus.cli.options import (
     BitDepthOption,
     LookupOption,
+    OverwriteOption,
     ProjectorOption,
     RigOption,
     SeedOption,
@@ -59,9 +60,7 @@ def register(app: typer.Typer) -> None:
         sensor: SensorOption = "ideal",
         seed: SeedOption = 0,
         variant: VariantOption = None,
-        overwrite: Annotated[
-            bool, typer.Option("--overwrite", help="Remove an earlier run's files in OUT first.")
-        ] = False,
+        overwrite: OverwriteOption = False,
         resume: Annotated[
             bool,
             typer.Option(

@@ -11,6 +11,7 @@ from virtus.cli.options import (
     BouncesOption,
     CameraLensOption,
     LookupOption,
+    OverwriteOption,
     ProjectorLensOption,
     ProjectorOption,
     RigOption,
@@ -36,10 +37,7 @@ def register(app: typer.Typer) -> None:
         bounces: BouncesOption = 1,
         projector_lens: ProjectorLensOption = None,
         camera_lens: CameraLensOption = None,
-        overwrite: Annotated[
-            bool,
-            typer.Option("--overwrite", help="Remove an earlier run's files in OUT first."),
-        ] = False,
+        overwrite: OverwriteOption = False,
         resume: Annotated[
             bool,
             typer.Option(

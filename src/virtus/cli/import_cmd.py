@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from virtus.cli.options import UnitsOption
+from virtus.cli.options import OverwriteOption, UnitsOption
 
 
 def register(app: typer.Typer) -> None:
@@ -38,10 +38,7 @@ def register(app: typer.Typer) -> None:
                 help="Camera ADC bits (8, 10, 12, 16); default: the smallest that holds the data."
             ),
         ] = None,
-        overwrite: Annotated[
-            bool,
-            typer.Option("--overwrite", help="Remove an earlier run's files in OUT first."),
-        ] = False,
+        overwrite: OverwriteOption = False,
         resume: Annotated[
             bool,
             typer.Option("--resume", help="Finish an interrupted import into OUT (same inputs)."),

@@ -47,6 +47,10 @@ UnitsOption = Annotated[
     LengthUnit | None,
     typer.Option(help="Length unit of a calibration file that states none: mm or m."),
 ]
+#: ``--overwrite``: the run may replace another run's directory (its files are removed first).
+OverwriteOption = Annotated[
+    bool, typer.Option("--overwrite", help="Remove an earlier run's files in OUT first.")
+]
 LookupOption = Annotated[Lookup | None, typer.Option(help=LOOKUP_HELP)]
 ProjectorOption = Annotated[
     str,

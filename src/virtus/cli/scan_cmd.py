@@ -12,6 +12,7 @@ from virtus.cli.options import (
     BouncesOption,
     CameraLensOption,
     LookupOption,
+    OverwriteOption,
     ProjectorLensOption,
     ProjectorOption,
     RigOption,
@@ -64,10 +65,7 @@ def register(app: typer.Typer) -> None:
         refine: Annotated[
             bool, typer.Option("--refine", help="Turntable: refine each view's pose by ICP.")
         ] = False,
-        overwrite: Annotated[
-            bool,
-            typer.Option("--overwrite", help="Remove an earlier run's files in OUT first."),
-        ] = False,
+        overwrite: OverwriteOption = False,
         resume: Annotated[
             bool,
             typer.Option(
