@@ -14,7 +14,6 @@ from virtus.render import render, trace
 from virtus.render.synthesis import synthesize
 from virtus.scene import default_scene
 from virtus.sensor import (
-    NOISE_BLOCK_PIXELS,
     SENSOR_PRESETS,
     Sensor,
     as_seed,
@@ -23,9 +22,12 @@ from virtus.sensor import (
 )
 
 
+BLOCK = 1 << 14
+
+
 def test_noise_stream_does_not_depend_on_the_split() -> None:
-    whole = standard_normal(5, 3, slice(0, 3 * NOISE_BLOCK_PIXELS + 17))
-    for step in (1000, NOISE_BLOCK_PIXELS, 40_000):
+    whole = standard_normal(5, 3, slice(0, 3 * BLOCK + 17))
+    for step in (1000, BLOCK, 40_000):
         parts = [
             standard_normal(5, 3, slice(start, min(start + step, whole.size)))
             for start in range(0, whole.size, step)
@@ -38,7 +40,7 @@ def test_noise_stream_does_not_depend_on_the_split() -> None:
 
 def test_dark_noise_has_the_stated_deviation() -> None:
     sensor = Sensor(bit_depth=16, exposure=1.0, system_gain_dn_per_e=1.0, dark_noise_e=4.0)
-    n = 4 * NOISE_BLOCK_PIXELS
+    n = 4 * BLOCK
     radiance = np.full((2, n), 1000.25, dtype=np.float32)
     digital = sensor.digitize(radiance, 1.0, seed=1, frames=np.array([0, 1]), pixels=slice(0, n))
     values = digital.astype(np.float64)

@@ -11,11 +11,16 @@ Camera: radiance -> exposure -> (noise) -> digital numbers (8, 10, 12 or 16 bit)
   current, DSNU, PRNU, full well, gain, black level, ADC; presets in :data:`SENSOR_PRESETS`
   and sensor files (:func:`load_sensor`).
 
-Randomness is counter-based: the noise of pixel ``p`` in frame ``f`` is element
-``p mod NOISE_BLOCK_PIXELS`` of a block of standard normals drawn from a Philox generator
-keyed by ``(seed, f, p // NOISE_BLOCK_PIXELS)``. A frame's noise therefore depends only on
-the seed, the frame index and the pixel, never on how the work is split into blocks or
-threads, or on the backend that computed the radiance: the same seed gives the same bytes.
+Randomness is counter-based (:data:`NOISE_STREAM`): the standard normal of pixel ``p`` in
+frame ``f`` is a pure function of ``(seed, f, p)``. The pair ``(seed, f)`` is mixed into a
+64-bit key ``(k0, k1)`` by SplitMix64 (Steele et al. 2014); the integer hash pcg4d
+(Jarzynski & Olano, "Hash Functions for GPU Rendering", JCGT 2020) of ``(p, k0, k1, 0)``
+gives two uniform 24-bit numbers, and Box-Muller turns them into one normal. Integer hashing
+is exact on every backend, so the same formula runs here in numpy and on the device in
+Dr.Jit (``virtus.render.sensor_jit``): a frame's noise never depends on how the work is
+split into blocks, threads or kernels, and the same seed gives the same bytes. Between
+backends only the float32 ``log``/``cos`` may differ by an ulp, which moves a digital
+number only when the value sits within that ulp of a rounding edge.
 
 Frames of 10, 12 and 16 bits are stored as uint16, 8-bit frames as uint8.
 """
@@ -38,13 +43,20 @@ from virtus.safeio import check_keys
 BIT_DEPTHS = (8, 10, 12, 16)
 #: Camera vignetting models.
 VIGNETTING = ("none", "cos4")
-#: Pixels per counter-based noise block (part of the noise stream's definition: changing it
-#: changes the bytes of every noisy capture).
-NOISE_BLOCK_PIXELS = 1 << 14
 #: Largest seed (seeds are non-negative 63-bit integers, so they survive JSON and C longs).
 MAX_SEED = (1 << 63) - 1
 #: Description of the noise stream, recorded with every capture.
-NOISE_STREAM = f"philox4x64(SeedSequence([seed, frame, pixel // {NOISE_BLOCK_PIXELS}]))"
+NOISE_STREAM = "pcg4d(p, splitmix64(seed, frame)) + box-muller, float32"
+#: Streams of earlier versions: a capture that names one still loads (its frames are what
+#: they are); re-rendering it draws the current stream.
+LEGACY_NOISE_STREAMS = ("philox4x64(SeedSequence([seed, frame, pixel // 16384]))",)
+#: pcg4d's linear congruential step (Numerical Recipes' constants, as in the paper).
+PCG_MULTIPLIER = 1664525
+PCG_INCREMENT = 1013904223
+#: Uniforms keep 24 bits (exact in float32): u1 in (0, 1], u2 in [0, 1).
+_UNIFORM_SHIFT = 8
+UNIFORM_SCALE = 2.0**-24
+_MASK64 = (1 << 64) - 1
 
 
 def as_seed(rng: np.random.Generator | int | None) -> int:
@@ -65,20 +77,53 @@ def as_seed(rng: np.random.Generator | int | None) -> int:
     return int(rng)
 
 
-def noise_block(seed: int, frame: int, block: int) -> np.ndarray:
-    """(NOISE_BLOCK_PIXELS,) float32 standard normals of one counter-based block."""
-    generator = np.random.Generator(np.random.Philox(np.random.SeedSequence([seed, frame, block])))
-    return generator.standard_normal(NOISE_BLOCK_PIXELS, dtype=np.float32)
+def _splitmix64(value: int) -> int:
+    """SplitMix64's output function on a 64-bit integer (Python ints, exact)."""
+    value = (value + 0x9E3779B97F4A7C15) & _MASK64
+    value = ((value ^ (value >> 30)) * 0xBF58476D1CE4E5B9) & _MASK64
+    value = ((value ^ (value >> 27)) * 0x94D049BB133111EB) & _MASK64
+    return value ^ (value >> 31)
+
+
+def stream_key(seed: int, frame: int) -> tuple[int, int]:
+    """The 64-bit key ``(k0, k1)`` (two uint32) of frame ``frame``'s stream under ``seed``."""
+    key = _splitmix64(_splitmix64(int(seed) & _MASK64) ^ (int(frame) & _MASK64))
+    return key & 0xFFFFFFFF, key >> 32
+
+
+def pcg4d(x: Any, y: Any, z: Any, w: Any) -> tuple[Any, Any, Any, Any]:
+    """The pcg4d hash of four uint32 arrays (numpy ``uint32`` or Dr.Jit ``UInt32``: only
+    wrapping integer arithmetic, shifts and xor, so both give the same bits)."""
+    x = x * PCG_MULTIPLIER + PCG_INCREMENT
+    y = y * PCG_MULTIPLIER + PCG_INCREMENT
+    z = z * PCG_MULTIPLIER + PCG_INCREMENT
+    w = w * PCG_MULTIPLIER + PCG_INCREMENT
+    x += y * w
+    y += z * x
+    z += x * y
+    w += y * z
+    x ^= x >> 16
+    y ^= y >> 16
+    z ^= z >> 16
+    w ^= w >> 16
+    x += y * w
+    y += z * x
+    z += x * y
+    w += y * z
+    return x, y, z, w
 
 
 def standard_normal(seed: int, frame: int, pixels: slice) -> np.ndarray:
     """(stop - start,) float32 standard normals of frame ``frame`` at the row-major pixel
     indices ``pixels`` (a slice with step 1), identical however the pixels are split."""
     start, stop = pixels.start or 0, pixels.stop
-    first, last = start // NOISE_BLOCK_PIXELS, (stop - 1) // NOISE_BLOCK_PIXELS
-    values = np.concatenate([noise_block(seed, frame, b) for b in range(first, last + 1)])
-    offset = start - first * NOISE_BLOCK_PIXELS
-    return values[offset : offset + stop - start]
+    k0, k1 = stream_key(seed, frame)
+    p = np.arange(start, stop, dtype=np.uint32)
+    a, b, _, _ = pcg4d(p, np.full_like(p, k0), np.full_like(p, k1), np.zeros_like(p))
+    u1 = ((a >> _UNIFORM_SHIFT) + np.uint32(1)).astype(np.float32) * np.float32(UNIFORM_SCALE)
+    u2 = (b >> _UNIFORM_SHIFT).astype(np.float32) * np.float32(UNIFORM_SCALE)
+    radius = np.sqrt(np.float32(-2.0) * np.log(u1))
+    return radius * np.cos(np.float32(2.0 * np.pi) * u2)
 
 
 #: Stream "frame" indices of the fixed-pattern noise maps (beyond any real frame index):
@@ -251,7 +296,7 @@ class Sensor:
         fields = set(cls.__dataclass_fields__)
         check_keys(data, sorted(fields | {"noise_stream"}), "sensor")
         stream = data.get("noise_stream", NOISE_STREAM)  # type: ignore[union-attr]
-        if stream != NOISE_STREAM:
+        if stream != NOISE_STREAM and stream not in LEGACY_NOISE_STREAMS:
             raise InputError("sensor.noise_stream", NOISE_STREAM, stream)
         return cls(**{key: data[key] for key in fields if key in data})  # type: ignore[index]
 
@@ -312,42 +357,72 @@ class Sensor:
     def _electrons_to_dn(
         self, signal_dn: np.ndarray, seed: int, frames: np.ndarray, pixels: slice
     ) -> np.ndarray:
-        """EMVA model of a (F, n) block whose noise-free signal is ``signal_dn`` (DN); works
-        in place on ``signal_dn`` (a fresh float32 array)."""
-        gain = np.float32(self.system_gain_dn_per_e)
-        electrons = signal_dn
-        scale = np.float32(1.0) / gain
+        """EMVA model of a (F, n) block whose noise-free signal is ``signal_dn`` (DN)."""
+        normal = np.stack([standard_normal(seed, int(frame), pixels) for frame in frames])
+        prnu = dsnu = None
         if self.prnu:
             prnu = _fixed_pattern(self.fixed_pattern_seed, _PRNU_STREAM, pixels.stop)[pixels]
-            scale = scale * (np.float32(1.0) + np.float32(self.prnu) * prnu)
-        electrons *= scale
-        dark_current = np.float32(self.dark_current_e_per_s * self.exposure_time_s)
-        # Temporal noise: shot noise of signal and dark current, and the dark (read) noise.
-        sigma = np.maximum(electrons, np.float32(0.0))
-        sigma += dark_current + np.float32(self.dark_noise_e**2)
-        np.sqrt(sigma, out=sigma)
-        for row, frame in enumerate(frames):
-            sigma[row] *= standard_normal(seed, int(frame), pixels)
-        electrons += sigma
-        offset = dark_current
         if self.dsnu_e:
             dsnu = _fixed_pattern(self.fixed_pattern_seed, _DSNU_STREAM, pixels.stop)[pixels]
-            offset = offset + np.float32(self.dsnu_e) * dsnu
-        electrons += offset
+        return self.emva(signal_dn, normal, prnu, dsnu, np)
+
+    def fixed_patterns(self, n_pixels: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """The (n_pixels,) float32 standard normals of the PRNU and DSNU maps (None where the
+        sensor has no such non-uniformity): the same for every frame and capture."""
+        prnu = (
+            _fixed_pattern(self.fixed_pattern_seed, _PRNU_STREAM, n_pixels) if self.prnu else None
+        )
+        dsnu = (
+            _fixed_pattern(self.fixed_pattern_seed, _DSNU_STREAM, n_pixels) if self.dsnu_e else None
+        )
+        return prnu, dsnu
+
+    def emva(self, signal_dn: Any, normal: Any, prnu: Any, dsnu: Any, xp: ModuleType) -> Any:
+        """The EMVA 1288 linear model on noise-free signals (DN), before rounding.
+
+        The one definition of the model, for numpy arrays on the host and Dr.Jit arrays on
+        the device: only arithmetic and ``xp.sqrt``, ``xp.maximum``, ``xp.minimum``.
+
+        Parameters
+        ----------
+        signal_dn : exposure times radiance, DN (float32 array).
+        normal : standard normals of the temporal noise, broadcastable to ``signal_dn``.
+        prnu, dsnu : standard normals of the fixed-pattern maps at the same pixels, or None.
+        xp : ``numpy`` or ``drjit``.
+
+        Returns
+        -------
+        Digital numbers before rounding and clipping (float32, same shape).
+        """
+        gain = float(self.system_gain_dn_per_e)  # type: ignore[arg-type]
+        scale = 1.0 / gain
+        if prnu is not None:
+            scale = scale * (1.0 + float(self.prnu) * prnu)
+        electrons = signal_dn * scale
+        dark_current = float(self.dark_current_e_per_s * self.exposure_time_s)
+        # Temporal noise: shot noise of signal and dark current, and the dark (read) noise.
+        variance = xp.maximum(electrons, 0.0) + (dark_current + float(self.dark_noise_e) ** 2)
+        electrons = electrons + xp.sqrt(variance) * normal + dark_current
+        if dsnu is not None:
+            electrons = electrons + float(self.dsnu_e) * dsnu
         if self.saturation_capacity_e is not None:
             # Only the top is clipped: the dark (read) noise is added after the well, and
             # the black level keeps it above zero DN.
-            np.minimum(electrons, np.float32(self.saturation_capacity_e), out=electrons)
-        electrons *= gain
-        electrons += np.float32(self.black_level_dn)
-        return electrons
+            electrons = xp.minimum(electrons, float(self.saturation_capacity_e))
+        return electrons * gain + float(self.black_level_dn)
 
-    def digitize_jit(self, radiance: Any, exposure: float, dr: ModuleType) -> Any:
-        """:meth:`digitize` of a noise-free sensor on a Dr.Jit Float array (on the device
-        that traced it); returns a Float of whole digital numbers in [0, full scale]."""
+    def digitize_jit(
+        self, radiance: Any, exposure: float, dr: ModuleType, noise: Any = None
+    ) -> Any:
+        """:meth:`digitize` on a Dr.Jit Float array (on the device that traced it): whole
+        digital numbers in [0, full scale] as a Float. A noisy sensor needs ``noise``, a tuple
+        ``(normal, prnu, dsnu)`` of Dr.Jit arrays of the same streams the host draws."""
+        values = radiance * float(exposure)
         if self.noisy:
-            raise VirtusError("digitize_jit: the EMVA model digitises on the host streams")
-        return dr.clip(dr.round(radiance * float(exposure)), 0.0, float(self.full_scale))
+            if noise is None:
+                raise VirtusError("digitize_jit: a noisy sensor needs its noise streams")
+            values = self.emva(values, *noise, dr)
+        return dr.clip(dr.round(values), 0.0, float(self.full_scale))
 
 
 def _non_negative(name: str, value: object) -> float:

@@ -64,9 +64,11 @@ Model
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -234,9 +236,11 @@ class _Tracer:
         self.projector = mi.Point3f(*(float(x) for x in proj2world.t))
         self.has_lights = len(mscene.emitters()) > 0
 
-    def _rays(self, directions: np.ndarray):  # noqa: ANN202
+    def _rays(self, directions):  # noqa: ANN001, ANN202
         mi = self.mi
-        d = mi.Vector3f(directions[0], directions[1], directions[2])
+        d = directions
+        if not isinstance(d, mi.Vector3f):
+            d = mi.Vector3f(directions[0], directions[1], directions[2])
         ray = mi.Ray3f(mi.Point3f(0.0, 0.0, 0.0), d)
         return self.cam2world @ ray
 
@@ -261,12 +265,14 @@ class _Tracer:
         theta = angle + index * _GOLDEN_ANGLE
         return r * dr.cos(theta), r * dr.sin(theta)
 
-    def _lens_rays(self, directions: np.ndarray, first: int, spp: int, lens: ThinLens):  # noqa: ANN202
+    def _lens_rays(self, directions, first: int, spp: int, lens: ThinLens):  # noqa: ANN001, ANN202
         """Thin-lens camera rays: from a stratified aperture point toward the point where the
         pinhole ray meets the focus plane (see the module docstring)."""
         mi, dr = self.mi, self.dr
-        d = mi.Vector3f(directions[0], directions[1], directions[2])
-        index = self._indices(len(directions[0]), first)
+        d = directions
+        if not isinstance(d, mi.Vector3f):
+            d = mi.Vector3f(directions[0], directions[1], directions[2])
+        index = self._indices(dr.width(d), first)
         pixel = index // spp
         shift = mi.sample_tea_32(pixel, mi.UInt32(_STREAM_CAMERA), _TEA_ROUNDS)[0] % spp
         angle = 2.0 * dr.pi * self._random(pixel, _STREAM_CAMERA + 1)
@@ -372,9 +378,9 @@ class _Tracer:
         radiance = dr.select(usable, f_cos * emitted[0], 0.0)
         return radiance if throughput is None else radiance * throughput
 
-    def samples(
+    def samples_device(
         self,
-        directions: np.ndarray,
+        directions: np.ndarray | object,
         first: int,
         projector: Intrinsics,
         spp: int,
@@ -383,19 +389,20 @@ class _Tracer:
         projector_lens: ThinLens | None = None,
         aperture_samples: int = 1,
         camera_lens: ThinLens | None = None,
-    ) -> dict[str, np.ndarray]:
-        """Supersample rays (3, N) float32, camera frame, whose first has the global index
-        ``first`` -> per sample and tap (N, T) float32: white-projector radiance divided by
-        ``spp * aperture_samples`` (0 where unlit), projector coordinates (0 where unlit);
-        and per sample (N,): with ambient light the diffuse reflectance ``rho_d``, with
-        scene lights their radiance ``lights``.
+    ) -> tuple[list[dict], dict]:
+        """Supersample rays (3, N) float32, camera frame (numpy, or a Dr.Jit ``Vector3f``
+        already on the device), whose first has the global index ``first`` -> Dr.Jit arrays,
+        evaluated, on the device: per tap (T dicts of (N,) Float) the white-projector radiance
+        divided by ``spp * aperture_samples`` (0 where unlit) and the projector coordinates
+        (0 where unlit); per sample (N,): with ambient light the diffuse reflectance
+        ``rho_d``, with scene lights their radiance ``lights``.
 
-        Without projector distortion everything is computed here; with distortion the
-        normalised coordinates ``(x/z, y/z)`` are returned (keys ``xn``, ``yn``, and
-        ``radiance``) for the projector model to distort in numpy.
+        Without projector distortion the taps are ``weight, u_p, v_p``; with distortion
+        the normalised coordinates ``(x/z, y/z)`` (keys ``xn``, ``yn``, and ``radiance``)
+        for the projector model to distort.
         """
         mi, dr = self.mi, self.dr
-        n = directions.shape[1]
+        n = dr.width(directions) if isinstance(directions, mi.Vector3f) else directions.shape[1]
         if camera_lens is None:
             ray = self._rays(directions)
         else:
@@ -448,12 +455,174 @@ class _Tracer:
         if lights is not None:
             per_sample["lights"] = lights
         dr.eval(*[a for tap in taps for a in tap.values()], *per_sample.values())
+        return taps, per_sample
+
+    def samples(self, directions: np.ndarray, first: int, *args, **kwargs) -> dict[str, np.ndarray]:  # noqa: ANN002, ANN003
+        """:meth:`samples_device` with every array copied to numpy: per sample and tap (N, T)
+        float32 (``weight``, ``u_p``, ``v_p``, or ``radiance``, ``xn``, ``yn``), per sample
+        (N,) ``rho_d`` and ``lights`` where present."""
+        taps, per_sample = self.samples_device(directions, first, *args, **kwargs)
         if len(taps) == 1:  # a view, no copy (the ideal renderer's case)
             out = {key: value.numpy()[:, None] for key, value in taps[0].items()}
         else:
             out = {key: np.stack([tap[key].numpy() for tap in taps], axis=1) for key in taps[0]}
         out.update({key: value.numpy() for key, value in per_sample.items()})
         return out
+
+
+@dataclass(frozen=True, eq=False)
+class Pass:
+    """One pose's checked tracing settings and its Mitsuba scene: what :func:`trace` and
+    the device-resident :func:`virtus.render.device.trace_device` share."""
+
+    rig: Rig
+    scene: Scene
+    cam2world: Pose
+    spp: int
+    bounces: int
+    aperture_samples: int
+    projector_lens: ThinLens | None
+    camera_lens: ThinLens | None
+    mi: Any
+    dr: Any
+    variant: str
+    tracer: _Tracer
+
+    @property
+    def camera(self) -> Intrinsics:
+        return self.rig.camera.intrinsics
+
+    @property
+    def projector(self) -> Intrinsics:
+        return self.rig.projector.intrinsics
+
+    @property
+    def height(self) -> int:
+        return self.camera.height
+
+    @property
+    def width(self) -> int:
+        return self.camera.width
+
+    @property
+    def n_pixels(self) -> int:
+        return self.height * self.width
+
+    @property
+    def n_rays(self) -> int:
+        """Camera supersamples of the pose."""
+        return self.n_pixels * self.spp
+
+    @property
+    def taps(self) -> int:
+        """Taps per camera supersample, ``bounces * aperture_samples``."""
+        return self.bounces * self.aperture_samples
+
+    @property
+    def chunk(self) -> int:
+        """Supersamples per Mitsuba call (a whole number of pixels)."""
+        return max(self.spp, _RAYS_PER_CHUNK // (self.spp * self.taps) * self.spp)
+
+    def options(self) -> dict[str, Any]:
+        """Keyword arguments of :meth:`_Tracer.samples_device` besides the rays."""
+        return {
+            "projector": self.projector,
+            "spp": self.spp,
+            "ambient": self.scene.ambient,
+            "bounces": self.bounces,
+            "projector_lens": self.projector_lens,
+            "aperture_samples": self.aperture_samples,
+            "camera_lens": self.camera_lens,
+        }
+
+
+def prepare_pass(
+    rig: Rig,
+    scene: Scene,
+    *,
+    spp: int = 4,
+    cam2world: Pose | None = None,
+    variant: str | None = None,
+    bounces: int = 1,
+    projector_lens: ThinLens | None = None,
+    camera_lens: ThinLens | None = None,
+    aperture_samples: int | None = None,
+) -> Pass:
+    """Check the settings of :func:`trace` (same parameters) and load the scene into
+    Mitsuba."""
+    if not isinstance(rig, Rig):
+        raise InputError("rig", "a virtus.devices.Rig", type(rig).__name__)
+    if not isinstance(scene, Scene):
+        raise InputError("scene", "a virtus.scene.Scene", type(scene).__name__)
+    cam2world = Pose.identity() if cam2world is None else cam2world
+    offsets = sample_offsets(spp)
+    spp = len(offsets)
+    bounces = _check_count("bounces", bounces, MAX_BOUNCES)
+    projector_lens = _check_lens("projector_lens", projector_lens)
+    camera_lens = _check_lens("camera_lens", camera_lens)
+    if projector_lens is None:
+        if aperture_samples not in (None, 1):
+            raise InputError(
+                "aperture_samples", "None or 1 without a projector_lens", aperture_samples
+            )
+        aperture_samples = 1
+    elif aperture_samples is None:
+        aperture_samples = DEFAULT_APERTURE_SAMPLES
+    else:
+        aperture_samples = _check_count("aperture_samples", aperture_samples, MAX_APERTURE_SAMPLES)
+    check_in_front(scene, cam2world.inverse())
+
+    mi, dr, variant_name = mitsuba(variant)
+    mscene = mi.load_dict(scene_dict(mi, dr, scene))
+
+    camera = rig.camera.intrinsics
+    height, width = camera.height, camera.width
+    n_pixels = height * width
+    n_rays = n_pixels * spp
+    if n_rays >= 2**32:
+        raise InputError("spp", f"at most {2**32 // n_pixels - 1} for {width} x {height} px", spp)
+    tracer = _Tracer(mi, dr, mscene, cam2world, cam2world @ rig.proj2cam)
+
+    return Pass(
+        rig, scene, cam2world, spp, bounces, aperture_samples, projector_lens, camera_lens,
+        mi, dr, variant_name, tracer,
+    )  # fmt: skip
+
+
+def centre_truth(ps: Pass) -> GroundTruth:
+    """Ground truth through the pixel centres (``mask_multibounce`` left empty: it needs
+    the taps)."""
+    rig, tracer, projector = ps.rig, ps.tracer, ps.projector
+    height, width, n_pixels = ps.height, ps.width, ps.n_pixels
+    centre_dirs, _ = _camera_rays(ps.camera, ps.spp)
+    centre_t = np.ascontiguousarray(centre_dirs.T)
+    parts = [
+        tracer.centre(centre_t[:, i : i + _RAYS_PER_CHUNK], rig.cam2proj)
+        for i in range(0, n_pixels, _RAYS_PER_CHUNK)
+    ]
+    c = _concatenate(parts)
+    hit = c["hit"]
+    points = np.stack([c["px"], c["py"], c["pz"]], axis=1)
+    normals = np.stack([c["nx"], c["ny"], c["nz"]], axis=1).astype(np.float64)
+    xy = np.stack([c["xn"], c["yn"]], axis=1)
+    if projector.has_distortion:
+        finite = np.isfinite(xy[:, 0])
+        xy[finite] = projector.distort_normalized(xy[finite])
+    # The projector model (as Intrinsics.project), on the points' normalised coordinates.
+    proj_uv = np.stack(
+        [projector.fx * xy[:, 0] + projector.cx, projector.fy * xy[:, 1] + projector.cy], axis=1
+    )
+    outside = hit & ~_inside(proj_uv[:, 0], proj_uv[:, 1], projector)
+
+    return GroundTruth(
+        depth=points[:, 2].reshape(height, width),
+        points=points.reshape(height, width, 3),
+        normals=normals.reshape(height, width, 3),
+        proj_uv=proj_uv.reshape(height, width, 2),
+        mask_hit=hit.reshape(height, width),
+        mask_shadow=c["occluded"].reshape(height, width),
+        mask_outside=outside.reshape(height, width),
+    )
 
 
 def trace(
@@ -491,72 +660,21 @@ def trace(
     -------
     :class:`Trace` with ``spp * bounces * aperture_samples`` taps per pixel.
     """
-    if not isinstance(rig, Rig):
-        raise InputError("rig", "a virtus.devices.Rig", type(rig).__name__)
-    if not isinstance(scene, Scene):
-        raise InputError("scene", "a virtus.scene.Scene", type(scene).__name__)
-    cam2world = Pose.identity() if cam2world is None else cam2world
-    offsets = sample_offsets(spp)
-    spp = len(offsets)
-    bounces = _check_count("bounces", bounces, MAX_BOUNCES)
-    projector_lens = _check_lens("projector_lens", projector_lens)
-    camera_lens = _check_lens("camera_lens", camera_lens)
-    if projector_lens is None:
-        if aperture_samples not in (None, 1):
-            raise InputError(
-                "aperture_samples", "None or 1 without a projector_lens", aperture_samples
-            )
-        aperture_samples = 1
-    elif aperture_samples is None:
-        aperture_samples = DEFAULT_APERTURE_SAMPLES
-    else:
-        aperture_samples = _check_count("aperture_samples", aperture_samples, MAX_APERTURE_SAMPLES)
-    check_in_front(scene, cam2world.inverse())
-
-    mi, dr, variant_name = mitsuba(variant)
-    mscene = mi.load_dict(scene_dict(mi, dr, scene))
-
-    camera = rig.camera.intrinsics
-    projector = rig.projector.intrinsics
-    height, width = camera.height, camera.width
-    n_pixels = height * width
-    n_rays = n_pixels * spp
-    if n_rays >= 2**32:
-        raise InputError("spp", f"at most {2**32 // n_pixels - 1} for {width} x {height} px", spp)
-    centre_dirs, sample_dirs = _camera_rays(camera, spp)
-    tracer = _Tracer(mi, dr, mscene, cam2world, cam2world @ rig.proj2cam)
-
-    # ---- ground truth through the pixel centres (float64 directions) ----
-    centre_t = np.ascontiguousarray(centre_dirs.T)
-    parts = [
-        tracer.centre(centre_t[:, i : i + _RAYS_PER_CHUNK], rig.cam2proj)
-        for i in range(0, n_pixels, _RAYS_PER_CHUNK)
-    ]
-    c = _concatenate(parts)
-    hit = c["hit"]
-    points = np.stack([c["px"], c["py"], c["pz"]], axis=1)
-    normals = np.stack([c["nx"], c["ny"], c["nz"]], axis=1).astype(np.float64)
-    xy = np.stack([c["xn"], c["yn"]], axis=1)
-    if projector.has_distortion:
-        finite = np.isfinite(xy[:, 0])
-        xy[finite] = projector.distort_normalized(xy[finite])
-    # The projector model (as Intrinsics.project), on the points' normalised coordinates.
-    proj_uv = np.stack(
-        [projector.fx * xy[:, 0] + projector.cx, projector.fy * xy[:, 1] + projector.cy], axis=1
-    )
-    outside = hit & ~_inside(proj_uv[:, 0], proj_uv[:, 1], projector)
+    ps = prepare_pass(
+        rig, scene, spp=spp, cam2world=cam2world, variant=variant, bounces=bounces,
+        projector_lens=projector_lens, camera_lens=camera_lens,
+        aperture_samples=aperture_samples,
+    )  # fmt: skip
+    spp, bounces, aperture_samples = ps.spp, ps.bounces, ps.aperture_samples
+    projector, tracer, variant_name = ps.projector, ps.tracer, ps.variant
+    height, width, n_pixels, n_rays = ps.height, ps.width, ps.n_pixels, ps.n_rays
+    _, sample_dirs = _camera_rays(ps.camera, spp)
+    truth = centre_truth(ps)
 
     # ---- supersamples: taps of projector coordinates and white-projector radiance ----
-    taps = bounces * aperture_samples
-    step = max(spp, _RAYS_PER_CHUNK // (spp * taps) * spp)
-    options = {
-        "bounces": bounces,
-        "projector_lens": projector_lens,
-        "aperture_samples": aperture_samples,
-        "camera_lens": camera_lens,
-    }
+    taps, step = ps.taps, ps.chunk
     parts = [
-        tracer.samples(sample_dirs[:, i : i + step], i, projector, spp, scene.ambient, **options)
+        tracer.samples(sample_dirs[:, i : i + step], i, **ps.options())
         for i in range(0, n_rays, step)
     ]
     s = _concatenate(parts)
@@ -578,16 +696,8 @@ def trace(
         ambient += s["lights"].reshape(n_pixels, spp).mean(axis=1, dtype=np.float32)
     weight = weight.reshape(n_pixels, spp * taps)
     per_vertex = _by_vertex(weight, bounces, aperture_samples)
-    gt = GroundTruth(
-        depth=points[:, 2].reshape(height, width),
-        points=points.reshape(height, width, 3),
-        normals=normals.reshape(height, width, 3),
-        proj_uv=proj_uv.reshape(height, width, 2),
-        mask_hit=hit.reshape(height, width),
-        mask_shadow=c["occluded"].reshape(height, width),
-        mask_outside=outside.reshape(height, width),
-        mask_multibounce=(per_vertex[1:].sum(axis=0) > per_vertex[0]).reshape(height, width),
-    )
+    multibounce = (per_vertex[1:].sum(axis=0) > per_vertex[0]).reshape(height, width)
+    gt = dataclasses.replace(truth, mask_multibounce=multibounce)
     return Trace(
         height=height,
         width=width,
