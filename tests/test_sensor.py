@@ -21,7 +21,6 @@ from virtus.sensor import (
     standard_normal,
 )
 
-
 BLOCK = 1 << 14
 
 

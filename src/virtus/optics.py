@@ -203,13 +203,18 @@ class Intrinsics:
     def _distort(self, xy: np.ndarray) -> np.ndarray:
         if not self.has_distortion:
             return xy.copy()
-        k1, k2, p1, p2, k3, k4, k5, k6 = np.pad(self.dist_array, (0, 8 - self.dist_array.size))
-        x, y = xy[:, 0], xy[:, 1]
+        return np.stack(self.distort_xy(xy[:, 0], xy[:, 1]), axis=1)
+
+    def distort_xy(self, x: Any, y: Any) -> tuple[Any, Any]:
+        """OpenCV's distortion of ideal normalised coordinates given as two arrays of any
+        array type with arithmetic (numpy, or Dr.Jit on the device): ``(x_d, y_d)``."""
+        coefficients = np.pad(self.dist_array, (0, 8 - self.dist_array.size))
+        k1, k2, p1, p2, k3, k4, k5, k6 = (float(c) for c in coefficients)
         r2 = x * x + y * y
         radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
         xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
         yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
-        return np.stack([xd, yd], axis=1)
+        return xd, yd
 
     def _distort_jacobian(self, xy: np.ndarray) -> np.ndarray:
         """(N, 2, 2) Jacobian d(distorted)/d(ideal) of :meth:`_distort`."""

@@ -226,7 +226,8 @@ class ProjectorModel:
     def table_coordinate(self, coordinate: np.ndarray) -> np.ndarray:
         """Projector coordinates (px) -> positions in the table of :meth:`spread`."""
         r = self.supersampling
-        return coordinate * np.float32(r) + np.float32((r - 1) / 2)
+        # Python floats keep float32 arrays float32 and work on device arrays too.
+        return coordinate * float(r) + (r - 1) / 2
 
     def falloff_factor(
         self, u_p: np.ndarray, v_p: np.ndarray, intrinsics: Any
@@ -235,10 +236,12 @@ class ProjectorModel:
         fall-off; ``intrinsics``: the projector's (its fx, fy, cx, cy)."""
         if self.falloff == "none":
             return None
-        x = (u_p - np.float32(intrinsics.cx)) / np.float32(intrinsics.fx)
-        y = (v_p - np.float32(intrinsics.cy)) / np.float32(intrinsics.fy)
+        # Python floats: float32 arrays stay float32, and device (Dr.Jit) arrays work too.
+        x = (u_p - float(intrinsics.cx)) / float(intrinsics.fx)
+        y = (v_p - float(intrinsics.cy)) / float(intrinsics.fy)
         cos2 = 1.0 / (1.0 + x * x + y * y)
-        return (cos2 * cos2).astype(np.float32)
+        factor = cos2 * cos2
+        return factor.astype(np.float32) if isinstance(factor, np.ndarray) else factor
 
 
 #: Named projectors for ``--projector NAME``. ``ideal``: sharp DMD pixels, linear response,

@@ -13,8 +13,10 @@ from virtus.errors import InputError
 from virtus.groundtruth import GroundTruth
 from virtus.optics import ThinLens
 from virtus.projection import ProjectorModel, as_lookup
+from virtus.render.backend import choose_variant, mitsuba
+from virtus.render.device import DeviceFrames, DeviceTrace, trace_device
 from virtus.render.synthesis import synthesize
-from virtus.render.synthesis_jit import synthesize_digital
+from virtus.render.synthesis_jit import synthesize_on_device
 from virtus.render.tracing import trace
 from virtus.scene import Scene
 from virtus.sensor import Sensor, as_seed
@@ -78,6 +80,86 @@ class Rendering:
             else self.projector_lens.to_dict(),
             "camera_lens": None if self.camera_lens is None else self.camera_lens.to_dict(),
         }
+
+
+@dataclass(frozen=True, eq=False)
+class DeviceRendering:
+    """The frames of one pose kept on the device that traced them (:func:`render_device`).
+
+    Attributes
+    ----------
+    frames : the digital frames (:class:`~virtus.render.device.DeviceFrames`).
+    trace : the pass's taps (its ground truth is computed on demand).
+    exposure, sensor, seed, projector, projector_lens, camera_lens : as :class:`Rendering`.
+    """
+
+    frames: DeviceFrames
+    trace: DeviceTrace
+    exposure: float
+    sensor: Sensor
+    seed: int
+    projector: ProjectorModel
+    projector_lens: ThinLens | None = None
+    camera_lens: ThinLens | None = None
+
+    def to_rendering(self) -> Rendering:
+        """The host :class:`Rendering`: frames in one transfer, ground truth computed."""
+        gt = self.trace.ground_truth()
+        saturated = self.frames.saturated_mask()
+        return Rendering(
+            frames=self.frames.numpy(),
+            gt=dataclasses.replace(gt, mask_saturated=saturated),
+            exposure=self.exposure,
+            sensor=self.sensor,
+            seed=self.seed,
+            spp=self.trace.spp,
+            lookup=self.projector.pixel.value,
+            variant=self.trace.variant,
+            projector=self.projector,
+            bounces=self.trace.bounces,
+            aperture_samples=self.trace.aperture_samples,
+            projector_lens=self.projector_lens,
+            camera_lens=self.camera_lens,
+        )
+
+
+def render_device(
+    rig: Rig,
+    scene: Scene,
+    sequence: Any,
+    *,
+    projector: ProjectorModel,
+    sensor: Sensor,
+    seed: int = 0,
+    **options: Any,
+) -> DeviceRendering:
+    """:func:`render` without leaving the device: trace, synthesis and the sensor run where
+    Mitsuba runs (a GPU with ``cuda_ad_rgb``; the CPU with ``llvm_ad_rgb``, the twin the
+    tests check). Only the auto exposure reads the white frame on the host (one (P,) copy).
+
+    Parameters
+    ----------
+    rig, scene, sequence, projector, sensor : as :func:`render` (objects, not names).
+    seed : seed of the sensor's noise streams.
+    options : ``spp``, ``cam2world``, ``variant``, ``bounces``, ``projector_lens``,
+        ``camera_lens``, ``aperture_samples`` of :func:`virtus.render.tracing.trace`.
+    """
+    traced = trace_device(rig, scene, **options)
+    if sensor.vignetting != "none":
+        mi, _, _ = mitsuba(traced.variant)
+        traced = traced.scaled(mi.Float(sensor.vignetting_gain(rig.camera.intrinsics)))
+    exposure = sensor.exposure
+    if exposure == "auto":
+        white = np.asarray(traced.white().numpy(), dtype=np.float32)
+        exposure = sensor.exposure_for(white.reshape(traced.height, traced.width))
+    frames = synthesize_on_device(
+        traced, sequence, projector, sensor, float(exposure), seed, rig.projector.intrinsics
+    )
+    return DeviceRendering(
+        frames=frames, trace=traced, exposure=float(exposure), sensor=sensor, seed=seed,
+        projector=projector, projector_lens=options.get("projector_lens"),
+        camera_lens=options.get("camera_lens"),
+    )  # fmt: skip
 
 
 def render(
@@ -144,17 +226,20 @@ def render(
     if synthesis not in SYNTHESIS:
         raise InputError("synthesis", f"one of {SYNTHESIS}", synthesis)
     seed = as_seed(rng)
-    traced = trace(
-        rig,
-        scene,
-        spp=spp,
-        cam2world=cam2world,
-        variant=variant,
-        bounces=bounces,
-        projector_lens=projector_lens,
-        camera_lens=camera_lens,
-        aperture_samples=aperture_samples,
+    options = {
+        "spp": spp, "cam2world": cam2world, "variant": variant, "bounces": bounces,
+        "projector_lens": projector_lens, "camera_lens": camera_lens,
+        "aperture_samples": aperture_samples,
+    }  # fmt: skip
+    on_device = synthesis == "jit" or (
+        synthesis == "auto" and choose_variant(variant).startswith("cuda")
     )
+    if on_device:
+        device = render_device(
+            rig, scene, sequence, projector=projector, sensor=sensor, seed=seed, **options
+        )
+        return device.to_rendering()
+    traced = trace(rig, scene, **options)
     if sensor.vignetting != "none":
         # The camera lens's fall-off scales everything a pixel receives (auto exposure
         # then sees the vignetted white frame, as a real camera's does).
@@ -163,25 +248,20 @@ def render(
             traced, weight=traced.weight * gain[:, None], ambient=traced.ambient * gain
         )
     exposure_value = sensor.exposure_for(traced.white)
-    if synthesis == "jit" or (synthesis == "auto" and traced.variant.startswith("cuda")):
-        frames = synthesize_digital(
-            traced, sequence, projector, sensor, exposure_value, seed, intrinsics
-        )
-    else:
-        # The sensor is pointwise, so it runs on each synthesised block (no float stack).
-        options = {} if block_pixels is None else {"block_pixels": block_pixels}
-        frames = synthesize(
-            traced,
-            sequence,
-            projector,
-            projector_intrinsics=intrinsics,
-            transform=lambda block, frames, pixels: sensor.digitize(
-                block, exposure_value, seed=seed, frames=frames, pixels=pixels
-            ),
-            dtype=sensor.dtype,
-            threads=threads,
-            **options,
-        )
+    # The sensor is pointwise, so it runs on each synthesised block (no float stack).
+    block = {} if block_pixels is None else {"block_pixels": block_pixels}
+    frames = synthesize(
+        traced,
+        sequence,
+        projector,
+        projector_intrinsics=intrinsics,
+        transform=lambda values, frames, pixels: sensor.digitize(
+            values, exposure_value, seed=seed, frames=frames, pixels=pixels
+        ),
+        dtype=sensor.dtype,
+        threads=threads,
+        **block,
+    )
     saturated = (frames >= sensor.saturation_dn).any(axis=0)
     return Rendering(
         frames=frames,

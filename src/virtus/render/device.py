@@ -1,0 +1,290 @@
+"""Device-resident passes: taps and frames that stay where Mitsuba traced them.
+
+:func:`trace_device` is :func:`virtus.render.tracing.trace` without the host round trip:
+the camera rays are uploaded once per camera and kept on the device, the taps of every
+Mitsuba call are written straight into device arrays, and the pixel-centre ground truth is
+computed only when asked for (:meth:`DeviceTrace.ground_truth`). The frames synthesised
+from it (:func:`virtus.render.synthesis_jit.synthesize_on_device`) are one device array,
+copied to the host in one transfer (:meth:`DeviceFrames.numpy`) or handed to PyTorch
+without a copy (:meth:`DeviceFrames.torch`, DLPack).
+
+On a CUDA variant this is the GPU path; on ``llvm_ad_rgb`` the same code runs on the CPU,
+which is how the test suite checks it against the host path.
+
+Layouts (as :class:`virtus.render.tracing.Trace`): taps are (P, S) row-major flattened to
+P * S, column ``s * T + k * aperture_samples + j``; frames are (F, H, W) flattened
+frame-major to F * P.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from virtus.devices import Rig
+from virtus.groundtruth import GroundTruth
+from virtus.optics import Intrinsics, ThinLens
+from virtus.render.backend import mitsuba
+from virtus.render.tracing import Pass, Trace, _camera_rays, centre_truth, prepare_pass
+from virtus.scene import Scene
+from virtus.transforms import Pose
+
+__all__ = ["DeviceFrames", "DeviceTrace", "trace_device"]
+
+
+@dataclass(frozen=True, eq=False)
+class DeviceTrace:
+    """The taps of one pass as Dr.Jit arrays on the device that traced them.
+
+    Attributes
+    ----------
+    height, width, spp, projector_width, projector_height, bounces, aperture_samples,
+    variant : as :class:`virtus.render.tracing.Trace`.
+    weight, u_p, v_p : Float (P * S,) tap weights and projector coordinates (Trace's
+        (P, S) arrays, row-major).
+    ambient : Float (P,) ambient radiance, or None where the scene has none.
+    truth : computes the pixel-centre ground truth on demand (host arrays).
+    """
+
+    height: int
+    width: int
+    spp: int
+    projector_width: int
+    projector_height: int
+    weight: Any
+    u_p: Any
+    v_p: Any
+    ambient: Any
+    variant: str
+    bounces: int = 1
+    aperture_samples: int = 1
+    truth: Callable[[], GroundTruth] | None = None
+
+    @property
+    def n_pixels(self) -> int:
+        return self.height * self.width
+
+    @property
+    def taps_per_sample(self) -> int:
+        return self.bounces * self.aperture_samples
+
+    @property
+    def taps(self) -> int:
+        """Taps per pixel, S = spp * bounces * aperture_samples."""
+        return self.spp * self.taps_per_sample
+
+    def modules(self) -> tuple[Any, Any]:
+        """``(mitsuba, drjit)`` in this pass's variant."""
+        mi, dr, _ = mitsuba(self.variant)
+        return mi, dr
+
+    def white(self) -> Any:
+        """Float (P,) radiance under a full-on projector, ambient included."""
+        _, dr = self.modules()
+        white = dr.block_sum(self.weight, self.taps)
+        return white if self.ambient is None else white + self.ambient
+
+    def scaled(self, gain: Any) -> DeviceTrace:
+        """A copy whose weights and ambient are multiplied per pixel by ``gain`` (Float
+        (P,), e.g. the camera's vignetting)."""
+        mi, dr = self.modules()
+        pixel = dr.arange(mi.UInt32, self.n_pixels * self.taps) // self.taps
+        weight = self.weight * dr.gather(mi.Float, gain, pixel)
+        ambient = None if self.ambient is None else self.ambient * gain
+        dr.eval(weight, ambient)
+        return dataclasses.replace(self, weight=weight, ambient=ambient)
+
+    def vertex_radiance(self) -> Any:
+        """Float (bounces * P,) white-projector radiance by path vertex, vertex-major (as
+        :attr:`Trace.bounce_radiance`)."""
+        mi, dr = self.modules()
+        pixel = dr.arange(mi.UInt32, self.n_pixels)
+        per_sample, aperture = self.taps_per_sample, self.aperture_samples
+        rows = []
+        for vertex in range(self.bounces):
+            total = dr.zeros(mi.Float, self.n_pixels)
+            for sample in range(self.spp):
+                for j in range(aperture):
+                    column = sample * per_sample + vertex * aperture + j
+                    total += dr.gather(mi.Float, self.weight, pixel * self.taps + column)
+            rows.append(total)
+        out = dr.zeros(mi.Float, self.bounces * self.n_pixels)
+        for vertex, row in enumerate(rows):
+            dr.scatter(out, row, pixel + vertex * self.n_pixels)
+        dr.eval(out)
+        return out
+
+    def ground_truth(self) -> GroundTruth:
+        """Pixel-centre ground truth on the host, with ``mask_multibounce`` from the taps."""
+        if self.truth is None:
+            raise ValueError("this device trace was made without its ground truth")
+        truth = self.truth()
+        if self.bounces == 1:
+            multibounce = np.zeros((self.height, self.width), dtype=bool)
+        else:
+            per_vertex = self.vertex_radiance().numpy().reshape(self.bounces, -1)
+            multibounce = (per_vertex[1:].sum(axis=0) > per_vertex[0]).reshape(
+                self.height, self.width
+            )
+        return dataclasses.replace(truth, mask_multibounce=multibounce)
+
+    @classmethod
+    def from_trace(cls, trace: Trace) -> DeviceTrace:
+        """Upload a host :class:`Trace` (its ground truth comes along as it is)."""
+        mi, dr, _ = mitsuba(trace.variant)
+        ambient = mi.Float(trace.ambient) if np.any(trace.ambient) else None
+
+        def flat(array: np.ndarray) -> Any:
+            return mi.Float(np.ascontiguousarray(array, dtype=np.float32).reshape(-1))
+
+        weight, u_p, v_p = flat(trace.weight), flat(trace.u_p), flat(trace.v_p)
+        dr.eval(weight, u_p, v_p, ambient)
+        return cls(
+            height=trace.height, width=trace.width, spp=trace.spp,
+            projector_width=trace.projector_width, projector_height=trace.projector_height,
+            weight=weight, u_p=u_p, v_p=v_p, ambient=ambient, variant=trace.variant,
+            bounces=trace.bounces, aperture_samples=trace.aperture_samples,
+            truth=lambda: trace.gt,
+        )  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class DeviceFrames:
+    """Digital frames of one pose on the device.
+
+    Attributes
+    ----------
+    data : UInt8 (8-bit sensors) or UInt32 (F * H * W,) digital numbers, frame-major.
+    n_frames, height, width : the frame stack's shape.
+    dtype : numpy dtype of the frames on the host (uint8 or uint16).
+    saturated : Bool (H * W,) pixels at or above the sensor's saturation in some frame.
+    variant : the Mitsuba variant (device) holding them.
+    """
+
+    data: Any
+    n_frames: int
+    height: int
+    width: int
+    dtype: Any
+    saturated: Any
+    variant: str
+
+    def numpy(self) -> np.ndarray:
+        """(F, H, W) frames on the host: one transfer."""
+        return np.asarray(self.data.numpy(), dtype=self.dtype).reshape(
+            self.n_frames, self.height, self.width
+        )
+
+    def saturated_mask(self) -> np.ndarray:
+        """(H, W) bool saturation mask on the host."""
+        return np.asarray(self.saturated.numpy(), dtype=bool).reshape(self.height, self.width)
+
+    def torch(self) -> Any:
+        """The frames as a (F, H, W) PyTorch tensor on the same device, without a copy
+        (DLPack; torch is an optional extra)."""
+        try:
+            import torch
+        except ImportError:
+            from virtus.errors import VirtusError
+
+            raise VirtusError("DeviceFrames.torch needs PyTorch (pip install torch)") from None
+        tensor = torch.from_dlpack(self.data)
+        return tensor.reshape(self.n_frames, self.height, self.width)
+
+
+@functools.lru_cache(maxsize=2)
+def _device_directions(variant: str, intrinsics: Intrinsics, spp: int) -> Any:
+    """The supersample ray directions (camera frame) as a device ``Vector3f``, uploaded
+    once per camera (datasets and calibrations trace many poses with one camera)."""
+    mi, dr, _ = mitsuba(variant)
+    _, samples = _camera_rays(intrinsics, spp)
+    directions = mi.Vector3f(samples[0], samples[1], samples[2])
+    dr.eval(directions)
+    return directions
+
+
+def _project_taps(ps: Pass, tap: dict[str, Any]) -> tuple[Any, Any, Any]:
+    """``(weight, u_p, v_p)`` of one tap on the device; applies the projector's lens
+    distortion to taps that carry normalised coordinates (as the host path does)."""
+    if "weight" in tap:
+        return tap["weight"], tap["u_p"], tap["v_p"]
+    mi, dr, projector = ps.mi, ps.dr, ps.projector
+    x, y = projector.distort_xy(mi.Float64(tap["xn"]), mi.Float64(tap["yn"]))
+    u = mi.Float(float(projector.fx) * x + float(projector.cx))
+    v = mi.Float(float(projector.fy) * y + float(projector.cy))
+    lit = tap["radiance"] > 0
+    lit &= (u >= -0.5) & (u < projector.width - 0.5) & (v >= -0.5) & (v < projector.height - 0.5)
+    return (
+        dr.select(lit, tap["radiance"], 0.0),
+        dr.select(lit, u, 0.0),
+        dr.select(lit, v, 0.0),
+    )
+
+
+def trace_device(
+    rig: Rig,
+    scene: Scene,
+    *,
+    spp: int = 4,
+    cam2world: Pose | None = None,
+    variant: str | None = None,
+    bounces: int = 1,
+    projector_lens: ThinLens | None = None,
+    camera_lens: ThinLens | None = None,
+    aperture_samples: int | None = None,
+) -> DeviceTrace:
+    """Trace one pose and keep its taps on the device (parameters and model as
+    :func:`virtus.render.tracing.trace`, whose taps it reproduces)."""
+    ps = prepare_pass(
+        rig, scene, spp=spp, cam2world=cam2world, variant=variant, bounces=bounces,
+        projector_lens=projector_lens, camera_lens=camera_lens,
+        aperture_samples=aperture_samples,
+    )  # fmt: skip
+    mi, dr = ps.mi, ps.dr
+    directions = _device_directions(ps.variant, ps.camera, ps.spp)
+    taps, n_rays = ps.taps, ps.n_rays
+    size = n_rays * taps
+    weight, u_p, v_p = (dr.zeros(mi.Float, size) for _ in range(3))
+    per_sample: dict[str, Any] = {}
+    for first in range(0, n_rays, ps.chunk):
+        count = min(ps.chunk, n_rays - first)
+        if count == n_rays:
+            rays = directions
+        else:
+            rays = dr.gather(mi.Vector3f, directions, dr.arange(mi.UInt32, first, first + count))
+        tap_list, samples = ps.tracer.samples_device(rays, first, **ps.options())
+        if count == n_rays and len(tap_list) == 1 and "weight" in tap_list[0]:
+            # One call, one tap per sample: Mitsuba's arrays already have the layout.
+            weight, u_p, v_p = (tap_list[0][key] for key in ("weight", "u_p", "v_p"))
+            per_sample = dict(samples)
+            break
+        sample = dr.arange(mi.UInt32, count) + first
+        for column, tap in enumerate(tap_list):
+            values = _project_taps(ps, tap)
+            for target, value in zip((weight, u_p, v_p), values, strict=True):
+                dr.scatter(target, value, sample * taps + column)
+        for key, value in samples.items():
+            if key not in per_sample:
+                per_sample[key] = dr.zeros(mi.Float, n_rays)
+            dr.scatter(per_sample[key], value, sample)
+        dr.eval(weight, u_p, v_p, *per_sample.values())
+    ambient = None
+    if "rho_d" in per_sample:
+        ambient = float(scene.ambient) * dr.block_sum(per_sample["rho_d"], ps.spp) / ps.spp
+    if "lights" in per_sample:
+        lights = dr.block_sum(per_sample["lights"], ps.spp) / ps.spp
+        ambient = lights if ambient is None else ambient + lights
+    if ambient is not None:
+        dr.eval(ambient)
+    projector = ps.projector
+    return DeviceTrace(
+        height=ps.height, width=ps.width, spp=ps.spp, projector_width=projector.width,
+        projector_height=projector.height, weight=weight, u_p=u_p, v_p=v_p, ambient=ambient,
+        variant=ps.variant, bounces=ps.bounces, aperture_samples=ps.aperture_samples,
+        truth=functools.partial(centre_truth, ps),
+    )  # fmt: skip

@@ -1,0 +1,132 @@
+"""The device-resident path (trace, synthesis, sensor on Dr.Jit arrays) against the host path.
+
+CI has no GPU: these run the same code on ``llvm_ad_rgb``, the CPU twin of ``cuda_ad_rgb``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.test_render_support import small_rig
+from virtus.devices import Camera, Projector, Rig, default_rig
+from virtus.optics import Intrinsics, ThinLens
+from virtus.patterns import default_sequence
+from virtus.projection import PROJECTOR_PRESETS, ProjectorModel
+from virtus.render import render
+from virtus.render.backend import mitsuba
+from virtus.render.device import trace_device
+from virtus.render.pipeline import render_device
+from virtus.render.sensor_jit import frame_keys, standard_normal_jit
+from virtus.render.tracing import trace
+from virtus.scene import default_scene
+from virtus.sensor import SENSOR_PRESETS, Sensor, standard_normal
+
+VARIANT = "llvm_ad_rgb"
+#: Frames may differ by 1 DN where a value sits on a rounding edge: float32 sums in another
+#: order (the white frame's 99th percentile, so the exposure, moves by ~1e-8 relative) and
+#: an ulp of log/cos in the noise. Measured: at most 8e-5 of the values.
+MAX_OFF_BY_ONE_FRACTION = 1e-3
+GT_ARRAYS = ("depth", "points", "normals", "proj_uv", "mask_hit", "mask_shadow",
+             "mask_outside", "mask_multibounce", "mask_saturated")  # fmt: skip
+
+
+def distorted_rig() -> Rig:
+    k, p = default_rig().camera.intrinsics, default_rig().projector.intrinsics
+    camera = Intrinsics(k.fx / 6, k.fy / 6, 85.3, 71.2, 170, 150, dist=(-0.12, 0.08, 0.001, 0, 0))
+    projector = Intrinsics(p.fx, p.fy, 440.0, 600.0, p.width, p.height, dist=(0.06, -0.03, 0, 0))
+    return Rig(Camera(camera), Projector(projector), default_rig().proj2cam)
+
+
+def assert_same_rendering(host, device) -> None:
+    assert device.frames.dtype == host.frames.dtype and device.frames.shape == host.frames.shape
+    off = np.abs(host.frames.astype(np.int64) - device.frames.astype(np.int64))
+    assert off.max() <= 1
+    assert np.count_nonzero(off) <= MAX_OFF_BY_ONE_FRACTION * off.size
+    assert device.exposure == pytest.approx(host.exposure, rel=1e-6)
+    for name in GT_ARRAYS:
+        np.testing.assert_array_equal(getattr(device.gt, name), getattr(host.gt, name), name)
+
+
+CASES = {
+    "ideal nearest": {},
+    "bilinear": {"lookup": "bilinear"},
+    "noisy sensor, lightcrafter projector (psf, gamma, fall-off)": {
+        "sensor": SENSOR_PRESETS["imx174"],
+        "projector": PROJECTOR_PRESETS["lightcrafter"],
+    },
+    "vignetting, 12 bit": {"sensor": Sensor(bit_depth=12, vignetting="cos4")},
+    "interreflections": {"bounces": 2, "spp": 1},
+    "projector defocus": {
+        "projector_lens": ThinLens(aperture_m=0.01, focus_distance_m=0.6),
+        "aperture_samples": 3,
+        "spp": 1,
+    },
+    "camera depth of field": {
+        "camera_lens": ThinLens(aperture_m=0.01, focus_distance_m=0.8),
+        "spp": 4,
+    },
+}
+
+
+@pytest.mark.parametrize("options", CASES.values(), ids=CASES.keys())
+def test_device_path_renders_the_host_frames(options) -> None:
+    rig, scene, sequence = small_rig(), default_scene(), default_sequence()
+    host = render(rig, scene, sequence, synthesis="sparse", rng=3, variant=VARIANT, **options)
+    device = render(rig, scene, sequence, synthesis="jit", rng=3, variant=VARIANT, **options)
+    assert_same_rendering(host, device)
+
+
+def test_device_path_with_lens_distortion_and_off_centre_principal_points() -> None:
+    rig, scene, sequence = distorted_rig(), default_scene(), default_sequence()
+    options = {"rng": 5, "variant": VARIANT, "sensor": SENSOR_PRESETS["webcam"]}
+    host = render(rig, scene, sequence, synthesis="sparse", **options)
+    device = render(rig, scene, sequence, synthesis="jit", **options)
+    assert_same_rendering(host, device)
+
+
+def test_device_taps_equal_the_host_taps() -> None:
+    rig, scene = distorted_rig(), default_scene()
+    lens = ThinLens(aperture_m=0.01, focus_distance_m=0.6)
+    options = {"variant": VARIANT, "bounces": 2, "projector_lens": lens, "aperture_samples": 2}
+    host = trace(rig, scene, **options)
+    device = trace_device(rig, scene, **options)
+    shape = host.weight.shape
+    for name in ("weight", "u_p", "v_p"):
+        values = getattr(device, name).numpy().reshape(shape)
+        np.testing.assert_allclose(values, getattr(host, name), rtol=1e-6, atol=1e-5, err_msg=name)
+    np.testing.assert_allclose(device.white().numpy(), host.white.ravel(), rtol=1e-5)
+
+
+def test_frames_stay_on_the_device_until_asked() -> None:
+    mi, dr, _ = mitsuba(VARIANT)
+    sequence = default_sequence()
+    result = render_device(
+        small_rig(), default_scene(), sequence, projector=ProjectorModel(), sensor=Sensor(),
+        variant=VARIANT,
+    )  # fmt: skip
+    assert isinstance(result.frames.data, mi.UInt8)
+    assert dr.width(result.frames.data) == len(sequence) * 160 * 160
+    assert result.frames.numpy().shape == (len(sequence), 160, 160)
+
+
+def test_device_noise_streams_equal_the_host_streams() -> None:
+    mi, dr, _ = mitsuba(VARIANT)
+    n = 50_000
+    for seed, frame in ((0, 0), (7, 3), (2**62 + 5, 51), (1, 1 << 40)):
+        k0, k1 = frame_keys(mi, seed, np.array([frame]))
+        device = standard_normal_jit(mi, dr, k0, k1, dr.arange(mi.UInt32, 1000, 1000 + n))
+        host = standard_normal(seed, frame, slice(1000, 1000 + n))
+        # Integer hashing is exact; only float32 log/cos may differ by an ulp or so.
+        np.testing.assert_allclose(device.numpy(), host, rtol=0, atol=2e-6)
+
+
+def test_host_noise_is_standard_normal_and_uncorrelated() -> None:
+    values = standard_normal(11, 2, slice(0, 1 << 20)).astype(np.float64)
+    assert abs(values.mean()) < 5 / 2**10  # 5 standard errors
+    assert values.std() == pytest.approx(1.0, abs=5 / 2**10 / np.sqrt(2))
+    assert abs(np.corrcoef(values[:-1], values[1:])[0, 1]) < 5e-3
+    other = standard_normal(11, 3, slice(0, 1 << 20))
+    assert abs(np.corrcoef(values, other)[0, 1]) < 5e-3
+    # Tails of a normal: P(|z| > 3) = 0.0027.
+    assert np.mean(np.abs(values) > 3) == pytest.approx(0.0027, rel=0.1)
