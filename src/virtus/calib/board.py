@@ -55,7 +55,6 @@ MM = 1e-3
 PAPER_BOARDS = ("4x7", "5x9", "7x13")
 
 
-
 def _edge_blur(coverage: np.ndarray, blur_m: float, step_x: float, step_y: float) -> np.ndarray:
     """A board texture's dark-area coverage blurred by a Gaussian of ``blur_m`` metres
     (texels of ``step_x`` x ``step_y`` m), so supersampling integrates its edges."""
@@ -69,6 +68,7 @@ def _edge_blur(coverage: np.ndarray, blur_m: float, step_x: float, step_y: float
         coverage, (0, 0), sigmaX=blur_m / step_x, sigmaY=blur_m / step_y,
         borderType=cv2.BORDER_REPLICATE,
     )  # fmt: skip
+
 
 @dataclass(frozen=True)
 class CircleBoard:
