@@ -15,7 +15,7 @@ from virtus.patterns import default_sequence
 from virtus.projection import PROJECTOR_PRESETS, ProjectorModel
 from virtus.render import render
 from virtus.render.backend import mitsuba
-from virtus.render.device import trace_device
+from virtus.render.device import DeviceFrames, percentile_of_positive, trace_device
 from virtus.render.pipeline import render_device
 from virtus.render.sensor_jit import frame_keys, standard_normal_jit
 from virtus.render.tracing import trace
@@ -130,3 +130,29 @@ def test_host_noise_is_standard_normal_and_uncorrelated() -> None:
     assert abs(np.corrcoef(values, other)[0, 1]) < 5e-3
     # Tails of a normal: P(|z| > 3) = 0.0027.
     assert np.mean(np.abs(values) > 3) == pytest.approx(0.0027, rel=0.1)
+
+
+@pytest.mark.parametrize("size", [1, 2, 3, 1001, 100_000])
+def test_white_frame_percentile_on_the_device_is_numpys(size) -> None:
+    mi, _, _ = mitsuba(VARIANT)
+    rng = np.random.default_rng(size)
+    values = (rng.random(size) * 3).astype(np.float32)
+    values[rng.random(size) < 0.3] = 0.0
+    values[0] = 1.5  # at least one lit pixel
+    for q in (0.5, 50.0, 99.0, 100.0):
+        expected = np.percentile(values[values > 0], q)
+        assert percentile_of_positive(mi.Float(values), q) == pytest.approx(expected, rel=1e-7)
+    assert percentile_of_positive(mi.Float(np.zeros(size, np.float32)), 99.0) is None
+
+
+@pytest.mark.parametrize("shape", [(1, 3, 5), (2, 2, 2)])
+def test_16_bit_frames_come_back_whole_and_in_order(shape) -> None:
+    mi, dr, _ = mitsuba(VARIANT)
+    values = np.arange(np.prod(shape), dtype=np.uint32) * 4099 % 65536
+    frames = DeviceFrames(
+        data=mi.UInt32(values), n_frames=shape[0], height=shape[1], width=shape[2],
+        dtype=np.uint16, saturated=dr.zeros(mi.Bool, shape[1] * shape[2]), variant=VARIANT,
+    )  # fmt: skip
+    host = frames.numpy()
+    assert host.dtype == np.uint16
+    np.testing.assert_array_equal(host, values.reshape(shape))

@@ -43,6 +43,8 @@ from virtus.safeio import check_keys
 BIT_DEPTHS = (8, 10, 12, 16)
 #: Camera vignetting models.
 VIGNETTING = ("none", "cos4")
+#: Why an auto exposure is impossible.
+NO_LIGHT = "auto exposure: no pixel receives light (is the projector aimed at the scene?)"
 #: Largest seed (seeds are non-negative 63-bit integers, so they survive JSON and C longs).
 MAX_SEED = (1 << 63) - 1
 #: Description of the noise stream, recorded with every capture.
@@ -311,10 +313,12 @@ class Sensor:
             return float(self.exposure)
         lit = white[white > 0]
         if lit.size == 0:
-            raise VirtusError(
-                "auto exposure: no pixel receives light (is the projector aimed at the scene?)"
-            )
-        level = float(np.percentile(lit, self.auto_percentile))
+            raise VirtusError(NO_LIGHT)
+        return self.exposure_for_level(float(np.percentile(lit, self.auto_percentile)))
+
+    def exposure_for_level(self, level: float) -> float:
+        """The auto exposure that maps a white-frame radiance ``level`` (its
+        ``auto_percentile``-th percentile over lit pixels) to ``auto_target`` of full scale."""
         return self.auto_target * self.full_scale / level
 
     def digitize(

@@ -175,10 +175,18 @@ class DeviceFrames:
     variant: str
 
     def numpy(self) -> np.ndarray:
-        """(F, H, W) frames on the host: one transfer."""
-        return np.asarray(self.data.numpy(), dtype=self.dtype).reshape(
-            self.n_frames, self.height, self.width
-        )
+        """(F, H, W) frames on the host: one transfer (16-bit frames travel packed two per
+        32-bit word, so no byte is copied that the host does not keep)."""
+        shape = (self.n_frames, self.height, self.width)
+        if np.dtype(self.dtype).itemsize == 1:
+            return np.asarray(self.data.numpy(), dtype=self.dtype).reshape(shape)
+        mi, dr = _modules_of(self.data)
+        size = self.n_frames * self.height * self.width
+        pair = dr.arange(mi.UInt32, (size + 1) // 2) * 2
+        low = dr.gather(mi.UInt32, self.data, pair)
+        high = dr.gather(mi.UInt32, self.data, pair + 1, pair + 1 < size)
+        packed = np.asarray((low | (high << 16)).numpy(), dtype="<u4")
+        return packed.view("<u2")[:size].astype(self.dtype, copy=False).reshape(shape)
 
     def saturated_mask(self) -> np.ndarray:
         """(H, W) bool saturation mask on the host."""
@@ -288,3 +296,49 @@ def trace_device(
         variant=ps.variant, bounces=ps.bounces, aperture_samples=ps.aperture_samples,
         truth=functools.partial(centre_truth, ps),
     )  # fmt: skip
+
+
+def percentile_of_positive(values: Any, q: float) -> float | None:
+    """``np.percentile(v[v > 0], q)`` of a device Float array, computed where it lives.
+
+    Positive float32 values sort like their bit patterns, so two histogram passes over the
+    bits (high 16, then low 16 within the bucket that holds the rank) find the exact
+    order statistics numpy's linear interpolation uses; only two 256 KiB histograms
+    reach the host. Returns None when no value is positive.
+    """
+    mi, dr = _modules_of(values)
+    bits = dr.reinterpret_array(mi.UInt32, values)
+    positive = values > 0
+    high = bits >> 16
+    counts = _histogram(mi, dr, high, positive)
+    total = int(counts.sum())
+    if total == 0:
+        return None
+    position = (total - 1) * q / 100.0
+    ranks = sorted({int(np.floor(position)), min(int(np.floor(position)) + 1, total - 1)})
+    found = {}
+    cumulative = np.cumsum(counts)
+    for rank in ranks:
+        bucket = int(np.searchsorted(cumulative, rank, side="right"))
+        before = int(cumulative[bucket - 1]) if bucket else 0
+        low = _histogram(mi, dr, bits & 0xFFFF, positive & (high == bucket))
+        index = int(np.searchsorted(np.cumsum(low), rank - before, side="right"))
+        found[rank] = np.array([(bucket << 16) | index], dtype=np.uint32).view(np.float32)[0]
+    pair = np.array([found[ranks[0]], found[ranks[-1]]], dtype=np.float32)
+    return float(np.percentile(pair, 100.0 * (position - np.floor(position))))
+
+
+def _histogram(mi: Any, dr: Any, keys: Any, active: Any) -> np.ndarray:
+    """(65536,) int64 counts of UInt32 ``keys`` < 65536 where ``active``."""
+    counts = dr.zeros(mi.UInt32, 1 << 16)
+    dr.scatter_reduce(dr.ReduceOp.Add, counts, mi.UInt32(1), keys, active)
+    return np.asarray(counts.numpy(), dtype=np.int64)
+
+
+def _modules_of(array: Any) -> tuple[Any, Any]:
+    """``(mitsuba, drjit)`` of the variant that owns a Dr.Jit array."""
+    import drjit as dr
+
+    variant = "cuda_ad_rgb" if dr.backend_v(array) == dr.JitBackend.CUDA else "llvm_ad_rgb"
+    mi, _, _ = mitsuba(variant)
+    return mi, dr

@@ -9,17 +9,22 @@ from typing import Any, Literal
 import numpy as np
 
 from virtus.devices import Rig
-from virtus.errors import InputError
+from virtus.errors import InputError, VirtusError
 from virtus.groundtruth import GroundTruth
 from virtus.optics import ThinLens
 from virtus.projection import ProjectorModel, as_lookup
 from virtus.render.backend import choose_variant, mitsuba
-from virtus.render.device import DeviceFrames, DeviceTrace, trace_device
+from virtus.render.device import (
+    DeviceFrames,
+    DeviceTrace,
+    percentile_of_positive,
+    trace_device,
+)
 from virtus.render.synthesis import synthesize
 from virtus.render.synthesis_jit import synthesize_on_device
 from virtus.render.tracing import trace
 from virtus.scene import Scene
-from virtus.sensor import Sensor, as_seed
+from virtus.sensor import NO_LIGHT, Sensor, as_seed
 from virtus.transforms import Pose
 
 #: Where frames are synthesised (see :func:`render`).
@@ -150,8 +155,10 @@ def render_device(
         traced = traced.scaled(mi.Float(sensor.vignetting_gain(rig.camera.intrinsics)))
     exposure = sensor.exposure
     if exposure == "auto":
-        white = np.asarray(traced.white().numpy(), dtype=np.float32)
-        exposure = sensor.exposure_for(white.reshape(traced.height, traced.width))
+        level = percentile_of_positive(traced.white(), sensor.auto_percentile)
+        if level is None:
+            raise VirtusError(NO_LIGHT)
+        exposure = sensor.exposure_for_level(level)
     frames = synthesize_on_device(
         traced, sequence, projector, sensor, float(exposure), seed, rig.projector.intrinsics
     )
