@@ -43,12 +43,142 @@ def timed(function, repeats: int) -> tuple[list[float], object]:
     return times, result
 
 
+def synced(dr, function):  # noqa: ANN001, ANN201
+    """``function`` whose timing includes the device work it queued."""
+
+    def run():  # noqa: ANN202
+        result = function()
+        dr.sync_thread()
+        return result
+
+    return run
+
+
+def device_section(rig, scene, sequence, args, mitsuba_fps) -> dict:  # noqa: ANN001
+    """The device-resident path: frames/s into device memory, decoded, to the host, written
+    to Zarr, with its stage split; ratios against per-frame Mitsuba measured above."""
+    from virtus.projection import ProjectorModel
+    from virtus.render.backend import mitsuba
+    from virtus.render.device import percentile_of_positive, trace_device
+    from virtus.render.pipeline import render_device
+    from virtus.render.synthesis_jit import synthesize_on_device
+    from virtus.render.tracing import prepare_pass
+
+    n_frames = len(sequence)
+    _, dr, _ = mitsuba()
+    projector, sensor = ProjectorModel(pixel=args.lookup), Sensor()
+    options = {"spp": args.spp}
+    repeats = max(args.repeats, 10)
+    out: dict[str, object] = {}
+
+    def render_to_device():
+        return render_device(rig, scene, sequence, projector=projector, sensor=sensor, **options)
+
+    warm = synced(dr, render_to_device)()
+    times, _ = timed(synced(dr, render_to_device), repeats)
+    out["render_to_device_s"] = statistics.median(times)
+    out["frames_per_s_into_device_memory"] = n_frames / statistics.median(times)
+    stages = {
+        "scene_load": lambda: prepare_pass(rig, scene, **options),
+        "trace": lambda: trace_device(rig, scene, **options),
+        "exposure": lambda: percentile_of_positive(warm.trace.white(), 99.0),
+        "synthesis_and_sensor": lambda: synthesize_on_device(
+            warm.trace, sequence, projector, sensor, warm.exposure, 0, rig.projector.intrinsics
+        ),
+        "frames_to_host": lambda: warm.frames.numpy(),
+        "ground_truth_to_host": lambda: warm.trace.ground_truth(),
+    }
+    out["stage_s"] = {
+        name: statistics.median(timed(synced(dr, f), repeats)[0]) for name, f in stages.items()
+    }
+    host_times, _ = timed(synced(dr, lambda: render_to_device().to_rendering()), repeats)
+    out["frames_per_s_to_host_with_ground_truth"] = n_frames / statistics.median(host_times)
+    fastest = max(mitsuba_fps.values())
+    out["mitsuba_frames_per_s"] = fastest
+    out["speedup_vs_fastest_mitsuba"] = out["frames_per_s_into_device_memory"] / fastest
+    try:
+        from virtus.render.decode_jit import decode_on_device
+    except ImportError:
+        decode_on_device = None
+    if decode_on_device is not None:
+        data = warm.frames.data
+        height, width = rig.camera.height, rig.camera.width
+        for precision in ("float32", "float64"):
+
+            def decode(precision: str = precision) -> None:
+                result = decode_on_device(data, sequence, height, width, precision=precision)
+                dr.eval(*result.arrays())
+
+            synced(dr, decode)()
+            decode_times, _ = timed(synced(dr, decode), repeats)
+            out[f"frames_per_s_decoded_{precision}"] = n_frames / statistics.median(decode_times)
+        out["frames_per_s_decoded"] = out["frames_per_s_decoded_float32"]
+        start = time.perf_counter()
+        sequence.decode(warm.frames.numpy())
+        out["frames_per_s_decoded_host"] = n_frames / (time.perf_counter() - start)
+    out["zarr"] = zarr_write(warm.frames.numpy(), repeats=3)
+    return out
+
+
+def zarr_write(frames: np.ndarray, repeats: int) -> dict:
+    """Frames/s of writing one pose's frames into a local Zarr v3 array (one chunk per
+    frame, LZ4 through Blosc at level 1), median of ``repeats`` writes."""
+    try:
+        import zarr
+        from zarr.codecs import BloscCodec
+    except ImportError:
+        return {"skipped": "zarr is not installed"}
+    times = []
+    with tempfile.TemporaryDirectory() as folder:
+        for k in range(repeats):
+            start = time.perf_counter()
+            array = zarr.create_array(
+                Path(folder) / f"frames{k}.zarr", shape=frames.shape, dtype=frames.dtype,
+                chunks=(1, *frames.shape[1:]),
+                compressors=BloscCodec(cname="lz4", clevel=1, shuffle="bitshuffle"),
+            )  # fmt: skip
+            array[:] = frames
+            times.append(time.perf_counter() - start)
+        disk = sum(p.stat().st_size for p in Path(folder, "frames0.zarr").rglob("*"))
+    return {"frames_per_s": len(frames) / statistics.median(times), "mb": disk / 1e6}
+
+
+def print_device_section(device: dict, n_frames: int) -> None:
+    stages = ", ".join(f"{k} {v * 1e3:.1f} ms" for k, v in device["stage_s"].items())
+    print(
+        f"device-resident:       {device['frames_per_s_into_device_memory']:7.0f} frames/s into "
+        f"device memory ({device['render_to_device_s'] * 1e3:.1f} ms per {n_frames}-frame pose; "
+        f"{device['speedup_vs_fastest_mitsuba']:.1f} x per-frame Mitsuba)"
+    )
+    print(f"  stages (each timed alone): {stages}")
+    print(
+        f"  to the host with ground truth: "
+        f"{device['frames_per_s_to_host_with_ground_truth']:.0f} frames/s"
+    )
+    if "frames_per_s_decoded" in device:
+        print(
+            f"  decoded on the device: {device['frames_per_s_decoded_float32']:.0f} frames/s "
+            f"float32, {device['frames_per_s_decoded_float64']:.0f} float64 "
+            f"(host decoder: {device['frames_per_s_decoded_host']:.0f} frames/s)"
+        )
+    zarr = device["zarr"]
+    if "frames_per_s" in zarr:
+        print(f"  written to Zarr (lz4): {zarr['frames_per_s']:.0f} frames/s, {zarr['mb']:.1f} MB")
+    else:
+        print(f"  Zarr: {zarr['skipped']}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5, help="timed runs of our renderer")
     parser.add_argument("--spp", type=int, default=4)
     parser.add_argument("--lookup", default="nearest", choices=["nearest", "bilinear"])
     parser.add_argument("--json", type=Path, help="also write the numbers here")
+    parser.add_argument(
+        "--device",
+        action="store_true",
+        help="also run the device-resident section on a CPU variant (always on CUDA)",
+    )
     args = parser.parse_args()
 
     rig, scene, sequence = default_rig(), default_scene(), default_sequence()
@@ -159,6 +289,9 @@ def main() -> None:
     report["png_write"] = png
     report["gt_write_s"] = gt_s
 
+    if args.device or report["variant"].startswith("cuda"):
+        report["device"] = device_section(rig, scene, sequence, args, mitsuba_fps)
+
     report["load_average_1min"] = [load_before, os.getloadavg()[0]]
     print(f"machine: {report['machine']}; Mitsuba variant {report['variant']}")
     print(f"load average (1 min) before/after: {load_before:.2f} / {os.getloadavg()[0]:.2f}")
@@ -188,6 +321,8 @@ def main() -> None:
             f"{info['mb']:.1f} MB ({n_frames / info['s']:.0f} frames/s)"
         )
     print(f"write ground truth:    {gt_s:.2f} s ({len(GT_NAMES)} .npy arrays)")
+    if "device" in report:
+        print_device_section(report["device"], n_frames)
     if args.json:
         args.json.write_text(json.dumps(report, indent=2) + "\n")
 
