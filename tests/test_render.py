@@ -288,7 +288,9 @@ def test_jit_synthesis_gives_the_same_frames(sequence, lookup: str, bit_depth: i
     kwargs = {"lookup": lookup, "bit_depth": bit_depth}
     sparse = render(small_rig(), scene, sequence, synthesis="sparse", **kwargs)
     jit = render(small_rig(), scene, sequence, synthesis="jit", **kwargs)
-    assert jit.frames.dtype == sparse.frames.dtype and jit.exposure == sparse.exposure
+    assert jit.frames.dtype == sparse.frames.dtype
+    # The device path sums the white frame on the device, in another float32 order.
+    assert jit.exposure == pytest.approx(sparse.exposure, rel=1e-6)
     difference = np.abs(jit.frames.astype(int) - sparse.frames.astype(int))
     # float32 sums in another order: 1 DN where a value sits at a rounding midpoint.
     assert difference.max() <= tol.FRAME_ROUNDING_DN
