@@ -77,8 +77,9 @@ MASKS = ("valid", "hit", "shadow", "outside", "multibounce", "saturated")
 #: intersects in float32 (~1e-7 relative at 1 m); surfaces of different objects that come
 #: this close are indistinguishable anyway.
 OBJECT_TOLERANCE_M = 5e-4
-#: Camera rows per block when the modulation is computed (keeps its float64 copies of
-#: the frames small instead of a (N, H, W) float64 copy: 133 MB at 960 x 960, N = 18).
+#: Camera rows per block when labels are computed: their temporaries stay small (a few
+#: hundred kB at 960 px a row) instead of image-sized (a real (N, H, W) copy of the frames
+#: for the modulation alone is 133 MB at 960 x 960, N = 18).
 _BLOCK_ROWS = 32
 #: The "distance" of a point inside a mesh object's bounding box: analytic surfaces nearer
 #: than this win over it.
@@ -180,63 +181,123 @@ def _finest_phase_frames(sequence: Any, direction: str) -> tuple[list[int], Any]
     return indices, sequence.frames[indices[0]].coding()
 
 
+def modulation(frames: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """Least-squares modulation ``B`` of N phase-shifted images, in ``out``'s dtype.
+
+    The ``modulation`` of :func:`virtus.phase.wrapped_phase`: with shifts
+    ``d_n = 2 pi n / N``, ``B = (2 / N) hypot(sum I_n cos d_n, sum I_n sin d_n)`` (the sign
+    and offset of a coding do not change it). Computed in ``out``'s precision, by blocks of
+    :data:`_BLOCK_ROWS` rows (small temporaries instead of an (N, H, W) real copy).
+
+    Parameters
+    ----------
+    frames : (N, H, W) images of steps ``1..N`` in order, any intensity unit.
+    out : (H, W) real, written and returned (unit of ``frames``).
+    """
+    steps = frames.shape[0]
+    shifts = 2.0 * np.pi * np.arange(1, steps + 1) / steps
+    weights = np.stack([np.cos(shifts), np.sin(shifts)]).astype(out.dtype)
+    for row in range(0, frames.shape[1], _BLOCK_ROWS):
+        block = frames[:, row : row + _BLOCK_ROWS]
+        sums = weights @ block.reshape(steps, -1).astype(out.dtype)
+        value = np.hypot(sums[0], sums[1], out=sums[0])
+        value *= 2.0 / steps
+        out[row : row + _BLOCK_ROWS] = value.reshape(block.shape[1:])
+    return out
+
+
 def _direction_labels(
-    sequence: Any, frames: np.ndarray, proj_uv: np.ndarray, valid: np.ndarray, direction: str
-) -> dict[str, np.ndarray]:
-    """The :data:`DIRECTION_LABELS` of one direction (float64 / int32), invalid filled."""
+    sequence: Any,
+    frames: np.ndarray,
+    proj_uv: np.ndarray,
+    valid: np.ndarray,
+    direction: str,
+    out: dict[str, np.ndarray],
+) -> None:
+    """Write the :data:`DIRECTION_LABELS` of one direction into ``out`` (name -> (H, W)
+    view of the stored array, pre-filled with its fill value: NaN, order -1).
+
+    The absolute phase, its wrap and the fringe order are computed in float64 whatever the
+    stored dtype (phases reach ~10^3 rad: one rounding, at the store, keeps the labels
+    re-triangulating to the stored points); numerator, denominator and modulation are
+    computed in the stored dtype.
+    """
     axis = 0 if direction == "v" else 1
     period = sequence.periods(direction)[0]
-    pattern = sequence.axis_scale(direction) * np.where(valid, proj_uv[..., axis], 0.0)
-    absolute = _phase.coordinate_to_phase(pattern, period)
-    wrapped = _phase.wrap(absolute)
-    order = np.rint((absolute - wrapped) / _phase.TWO_PI)
     indices, coding = _finest_phase_frames(sequence, direction)
-    modulation = np.empty(frames.shape[1:])
-    for row in range(0, frames.shape[1], _BLOCK_ROWS):  # blocks: small float64 temporaries
-        block = frames[indices, row : row + _BLOCK_ROWS]
-        modulation[row : row + _BLOCK_ROWS] = coding.wrapped(block)[2]
-    amplitude = 0.5 * coding.steps * modulation
-    nan = np.nan
-    return {
-        "phase": np.where(valid, absolute, nan),
-        "wrapped": np.where(valid, wrapped, nan),
-        "order": np.where(valid, order, -1).astype(np.int32),
-        "numerator": np.where(valid, amplitude * np.sin(wrapped), nan),
-        "denominator": np.where(valid, amplitude * np.cos(wrapped), nan),
-        "modulation": modulation,
-    }
+    with np.errstate(invalid="ignore"):  # NaN / inf where invalid: never stored
+        pattern = sequence.axis_scale(direction) * proj_uv[..., axis]  # pattern units
+        absolute = _phase.coordinate_to_phase(pattern, period)
+        wrapped = _phase.wrap(absolute)
+        order = absolute - wrapped
+        order /= _phase.TWO_PI
+        np.rint(order, out=order)
+    np.copyto(out["phase"], absolute, where=valid, casting="same_kind")
+    np.copyto(out["wrapped"], wrapped, where=valid, casting="same_kind")
+    np.copyto(out["order"], order, where=valid, casting="unsafe")  # integral where valid
+    mod = modulation(frames[indices], out["modulation"])
+    amplitude = (0.5 * coding.steps) * mod
+    angle = out["wrapped"]  # NaN outside valid: so are numerator and denominator
+    np.multiply(amplitude, np.sin(angle), out=out["numerator"])
+    np.multiply(amplitude, np.cos(angle), out=out["denominator"])
 
 
-def _surface_distance(record: ObjectRecord, points: np.ndarray) -> np.ndarray:
-    """(M,) distance (m) from world points (M, 3) to an object's surface (inf: not it)."""
-    local = (points - record.pose.t) @ record.pose.R  # world -> object frame
+def _surface_distance(record: ObjectRecord, local: np.ndarray) -> np.ndarray:
+    """(M,) distance (m) from points (M, 3) in the object's frame to its surface (inf: not
+    it)."""
     if record.type == "sphere":
-        return np.abs(np.linalg.norm(local, axis=1) - record.size_m[0])
+        return np.abs(np.sqrt(np.einsum("ij,ij->i", local, local)) - record.size_m[0])
     if record.type in ("plane", "board"):
         half = 0.5 * np.asarray(record.size_m) + OBJECT_TOLERANCE_M
-        inside = np.all(np.abs(local[:, :2]) <= half, axis=1)
+        inside = (np.abs(local[:, 0]) <= half[0]) & (np.abs(local[:, 1]) <= half[1])
         return np.where(inside, np.abs(local[:, 2]), np.inf)
     if record.type == "box":
-        excess = np.abs(local) - 0.5 * np.asarray(record.size_m)
-        outside = np.linalg.norm(np.maximum(excess, 0.0), axis=1)
-        return np.abs(outside + np.minimum(excess.max(axis=1), 0.0))
+        excess = np.abs(local)
+        excess -= 0.5 * np.asarray(record.size_m)
+        largest = np.minimum(excess.max(axis=1), 0.0)
+        np.maximum(excess, 0.0, out=excess)
+        outside = np.sqrt(np.einsum("ij,ij->i", excess, excess))
+        return np.abs(outside + largest)
     low, high = np.asarray(record.size_m[:3]), np.asarray(record.size_m[3:])
     margin = OBJECT_TOLERANCE_M
     inside = np.all((local >= low - margin) & (local <= high + margin), axis=1)
     # Overlapping boxes: the nearer box centre wins (by a hair, within the sentinel).
-    nearness = np.linalg.norm(local - 0.5 * (low + high), axis=1) * 1e-6
+    offset = local - 0.5 * (low + high)
+    nearness = np.sqrt(np.einsum("ij,ij->i", offset, offset)) * 1e-6
     return np.where(inside, _MESH_BOX_DISTANCE_M + nearness, np.inf)
 
 
-def object_ids(objects: tuple[ObjectRecord, ...], points_world: np.ndarray) -> np.ndarray:
-    """(H, W) uint16 object id of each surface point (0: none) from (H, W, 3) world points."""
-    shape = points_world.shape[:2]
-    out = np.zeros(shape, dtype=np.uint16)
-    hit = np.isfinite(points_world).all(axis=-1)
+def object_ids(
+    objects: tuple[ObjectRecord, ...],
+    points: np.ndarray,
+    cam2world: Pose | None = None,
+    out: np.ndarray | None = None,
+) -> np.ndarray:
+    """(H, W) uint16 object id of each surface point (0: none).
+
+    Parameters
+    ----------
+    objects : the sample's objects (poses are object2world).
+    points : (H, W, 3) surface points, metres, NaN where nothing is hit; in the world frame,
+        or in the camera frame with ``cam2world`` given.
+    cam2world : camera pose in the world (None: ``points`` are world points).
+    out : (H, W) uint16 to write (default: a new array).
+    """
+    shape = points.shape[:2]
+    if out is None:
+        out = np.empty(shape, dtype=np.uint16)
+    out.fill(0)
+    hit = np.isfinite(points).all(axis=-1)
     if not objects or not hit.any():
         return out
-    pts = points_world[hit]
-    distances = np.stack([_surface_distance(o, pts) for o in objects])
+    pts = points[hit]
+    distances = np.empty((len(objects), pts.shape[0]))
+    for k, record in enumerate(objects):
+        # one transform per object: camera (or world) frame -> object frame
+        to_local = record.pose.inverse() if cam2world is None else record.pose.inverse() @ cam2world
+        local = pts @ to_local.R.T
+        local += to_local.t
+        distances[k] = _surface_distance(record, local)
     best = np.argmin(distances, axis=0)
     close = distances[best, np.arange(pts.shape[0])] <= OBJECT_TOLERANCE_M
     ids = np.array([o.id for o in objects], dtype=np.uint16)
@@ -245,64 +306,69 @@ def object_ids(objects: tuple[ObjectRecord, ...], points_world: np.ndarray) -> n
 
 
 def sample_arrays(
-    capture: Any, spec: SampleSpec, layout: tuple[ArraySpec, ...]
+    capture: Any,
+    spec: SampleSpec,
+    layout: tuple[ArraySpec, ...],
+    out: dict[str, np.ndarray] | None = None,
 ) -> dict[str, np.ndarray]:
-    """Every array of one sample (module docstring), cast to the layout's dtypes.
+    """Every array of one sample (module docstring), in the layout's dtypes.
 
     Parameters
     ----------
     capture : the sample's :class:`virtus.capture.Capture` (with ground truth).
     spec : its specification (objects, cam2world).
     layout : the store's arrays (:func:`array_layout`).
+    out : name -> writable array of the layout's per-sample shape and dtype (e.g. one
+        sample's slot of a shard buffer); every element is written. Default: new arrays.
 
     Returns
     -------
-    dict name -> array of the layout's per-sample shape and dtype.
+    ``out``: dict name -> array of the layout's per-sample shape and dtype.
     """
+    specs = {array.name: array for array in layout}
+    if out is None:
+        out = {a.name: np.empty(a.shape, dtype=a.dtype) for a in layout}
     gt = capture.ground_truth
     frames = capture.frames
     sequence = capture.sequence
     valid = gt.mask
-    masks = {
-        "valid": valid,
-        "hit": gt.mask_hit,
-        "shadow": gt.mask_shadow,
-        "outside": gt.mask_outside,
-        "multibounce": gt.mask_multibounce,
-        "saturated": (frames >= capture.full_scale).any(axis=0),
-    }
-    labels: dict[str, np.ndarray] = {
-        "depth": gt.depth,
-        "points": gt.points,
-        "normals": gt.normals,
-        "proj_uv": gt.proj_uv,
-        "masks": np.stack([masks[name] for name in MASKS]),
-    }
-    specs = {array.name: array for array in layout}
-    for name in DIRECTION_LABELS:
-        labels[name] = np.full(specs[name].shape, specs[name].fill, dtype=specs[name].dtype)
-    for direction in sequence.directions:
-        values = _direction_labels(sequence, frames, gt.proj_uv, valid, direction)
-        for name, value in values.items():
-            labels[name][DIRECTIONS.index(direction)] = value
-    points_world = gt.points
-    if spec.cam2world != Pose.identity():
-        points_world = spec.cam2world.apply(gt.points.reshape(-1, 3)).reshape(gt.points.shape)
-    labels["object_id"] = object_ids(spec.objects, points_world)
-    frames_out = np.zeros(specs["frames"].shape, dtype=specs["frames"].dtype)
+    frames_out = out["frames"]
     frames_out[: frames.shape[0]] = frames
-    labels["frames"] = frames_out
-    return {
-        array.name: np.ascontiguousarray(labels[array.name], dtype=array.dtype) for array in layout
-    }
+    frames_out[frames.shape[0] :] = 0
+    masks = out["masks"]
+    for index, name in enumerate(MASKS):
+        if name == "saturated":  # some frame at full scale: the brightest one is
+            np.greater_equal(frames.max(axis=0), capture.full_scale, out=masks[index])
+        elif name == "valid":
+            masks[index] = valid
+        else:
+            masks[index] = getattr(gt, f"mask_{name}")
+    for name in ("depth", "points", "normals", "proj_uv"):
+        np.copyto(out[name], getattr(gt, name), casting="same_kind")
+    for name in DIRECTION_LABELS:
+        out[name].fill(specs[name].fill)
+    # Row blocks: every temporary stays small (cache-resident, no fresh memory per sample).
+    for row in range(0, valid.shape[0], _BLOCK_ROWS):
+        rows = slice(row, row + _BLOCK_ROWS)
+        for direction in sequence.directions:
+            channel = DIRECTIONS.index(direction)
+            views = {name: out[name][channel, rows] for name in DIRECTION_LABELS}
+            _direction_labels(
+                sequence, frames[:, rows], gt.proj_uv[rows], valid[rows], direction, views
+            )
+        object_ids(spec.objects, gt.points[rows], spec.cam2world, out=out["object_id"][rows])
+    return out
 
 
 def sample_checksum(arrays: dict[str, np.ndarray], layout: tuple[ArraySpec, ...]) -> str:
     """``"sha256:<hex>"`` of a sample's arrays: name, dtype, shape and C-order bytes of each,
-    in layout order (what :func:`virtus.data.store.DatasetStore.verify` recomputes)."""
+    in layout order (what :func:`virtus.data.store.DatasetStore.verify` recomputes).
+
+    SHA-256 rather than BLAKE2b: with the SHA extensions of current x86 CPUs it hashes
+    ~1 GB/s on one core of the benchmark machine, BLAKE2b ~0.4 GB/s."""
     digest = hashlib.sha256()
     for array in layout:
         value = np.ascontiguousarray(arrays[array.name])
         digest.update(f"{array.name}|{value.dtype.str}|{value.shape}|".encode())
-        digest.update(value.tobytes())
+        digest.update(value)  # the array's buffer: no copy of its bytes
     return f"sha256:{digest.hexdigest()}"
