@@ -30,6 +30,7 @@ from virtus.data.sampling import Randomiser
 from virtus.devices import Camera, Projector, Rig, default_rig
 from virtus.errors import InputError, VirtusError
 from virtus.optics import Intrinsics
+from virtus.phase import wrapped_phase
 from virtus.reconstruct import points_from_decoded
 
 #: Labels -> projector coordinates -> triangulation vs the stored points (the issue's bound).
@@ -239,6 +240,15 @@ def test_labels_agree_with_decoding_and_with_each_other(mixed) -> None:
             assert np.mean(error < DECODE_AGREEMENT_RAD) > 0.98
             assert (order[~masks["valid"]] == -1).all()
             assert np.isnan(phase[~masks["valid"]]).all()
+            # the modulation label (computed in float32) is the least-squares B of the
+            # direction's finest phase set, as the decoder computes it in float64
+            steps = [
+                i for i, f in enumerate(sequence.frames)
+                if f.kind == "phase" and f.direction == d and f.period == sequence.periods(d)[0]
+            ]  # fmt: skip
+            steps.sort(key=lambda i: sequence.frames[i].step)
+            expected = wrapped_phase(frames[steps])[2]
+            assert np.allclose(arrays["modulation"][c], expected, rtol=1e-5, atol=1e-3)
         depth = arrays["depth"]
         assert np.allclose(depth, arrays["points"][..., 2], equal_nan=True)
         hit = masks["hit"]
@@ -270,6 +280,51 @@ def test_same_store_from_worker_processes_and_sample_independent_of_num(tmp_path
     assert one == two
     report = DatasetStore.open(tmp_path / "two").verify()
     assert report.ok and report.checked == 12
+
+
+@pytest.mark.parametrize("codec", ["blosc-zstd", "blosc-lz4", "zstd", "none"])
+def test_shards_written_directly_are_the_bytes_zarr_writes(tmp_path, codec) -> None:
+    """The store writes shard files itself (virtus.data.shards): Zarr must read them as its
+    own, so they must be Zarr's bytes -- every dtype of a store, a chunk of only the fill
+    value (Zarr omits it) and a partial last shard."""
+    import zarr
+
+    from virtus.data.shards import ShardEncoder
+    from virtus.data.store import _codec
+
+    rng = np.random.default_rng(5)
+    group = zarr.open_group(tmp_path, mode="w")
+    for dtype, fill in [("uint8", 0), ("uint16", 0), ("float32", np.nan), ("float64", np.nan),
+                        ("int32", -1), ("bool", False)]:  # fmt: skip
+        shape = (7, 3, 12, 10)
+        data = (rng.random(shape) * 300).astype(dtype)
+        data[1] = fill
+        if data.dtype.kind == "f":
+            data[0, 0, :2] = np.nan
+        arrays = [
+            group.create_array(
+                f"{dtype}_{name}",
+                shape=shape,
+                chunks=(1, *shape[1:]),
+                shards=(3, *shape[1:]),
+                dtype=dtype,
+                fill_value=fill,
+                compressors=_codec(codec, 3),
+            )  # fmt: skip
+            for name in ("zarr", "direct")
+        ]
+        arrays[0][:] = data
+        encoder = ShardEncoder.for_array(arrays[1], tmp_path / f"{dtype}_direct")
+        assert encoder is not None
+        for shard in range(3):
+            encoder.write(
+                shard, [encoder.encode(chunk) for chunk in data[3 * shard : 3 * shard + 3]]
+            )
+            theirs = tmp_path / f"{dtype}_zarr" / encoder.key(shard)
+            assert encoder.path(shard).read_bytes() == theirs.read_bytes(), (dtype, shard)
+        assert np.array_equal(arrays[1][:], data, equal_nan=data.dtype.kind == "f")
+    unsupported = group.create_array("c_order_chunks", shape=(4, 6), chunks=(2, 3), dtype="u1")
+    assert ShardEncoder.for_array(unsupported, tmp_path / "c_order_chunks") is None
 
 
 def test_png_storage_holds_the_same_samples(tmp_path, capsys) -> None:

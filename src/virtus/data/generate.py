@@ -12,10 +12,12 @@
    its manifest says which shards are missing.
 3. Each missing shard is one task, :func:`render_shard`: render its samples
    (:meth:`virtus.scanner.Scanner.capture`), make their labels
-   (:func:`~virtus.data.labels.sample_arrays`), write the shard and then its record. A task
-   depends only on the store path and the shard number, so it is idempotent: a retried or
-   repeated task writes the same bytes. Tasks run in this process (``workers=1``), in
-   ``workers`` spawned processes (each owns the shards it is given), or as Ray tasks.
+   (:func:`~virtus.data.labels.sample_arrays`) into a shard buffer, write the shard and
+   then its record. A task depends only on the store path and the shard number, so it is
+   idempotent: a retried or repeated task writes the same bytes. Tasks run in this process
+   (``workers=1``: each shard is written on a background thread while the next one is
+   rendered), in ``workers`` spawned processes (each owns the shards it is given), or as
+   Ray tasks.
 
 Rerunning the same command after an interruption (even ``kill -9``) renders only the
 shards without a record; the store ends byte for byte as an uninterrupted run leaves it.
@@ -31,6 +33,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from virtus import __version__
 from virtus.data.config import MAX_SHARD_BYTES, MAX_WORKERS, DatasetConfig
 from virtus.data.labels import array_layout, sample_arrays
@@ -39,13 +43,29 @@ from virtus.data.store import ASSETS_DIR, DatasetStore
 from virtus.errors import InputError
 from virtus.runs import directory_lock, file_digest
 
-__all__ = ["GenerateReport", "generate", "input_digests", "render_shard", "sample_meta"]
+__all__ = [
+    "TIMING_KEYS",
+    "GenerateReport",
+    "generate",
+    "input_digests",
+    "render_shard",
+    "sample_meta",
+]
 
 #: Images up to this many pixels are synthesised on one thread (thread start-up would
 #: cost more than the work).
 _SMALL_IMAGE_PIXELS = 128 * 128
 #: Progress callback: (complete samples, target samples, samples rendered by this run).
 Progress = Callable[[int, int, int], None]
+#: Stages timed by a run (seconds): ``render`` (scene, trace and frame synthesis),
+#: ``labels`` (:func:`~virtus.data.labels.sample_arrays`), ``checksum`` and ``compression``
+#: (work, summed over the threads doing it), ``io`` (shard files and records), ``write``
+#: (the whole :meth:`~virtus.data.store.DatasetStore.write_shard`: checksum, compression
+#: and io side by side), ``write_wait`` (rendering held up by a shard still being written).
+TIMING_KEYS = ("render", "labels", "checksum", "compression", "io", "write", "write_wait")
+#: In a worker process: the shard buffer kept between tasks (see :func:`_shard_buffer`).
+_IN_WORKER = False
+_WORKER_BUFFER: tuple[tuple[str, str], dict[str, np.ndarray]] | None = None
 
 
 @dataclass
@@ -59,8 +79,9 @@ class GenerateReport:
     complete : samples of ``[0, num_samples)`` complete at the end.
     rendered : samples rendered by this call (0 when the store was already complete).
     seconds : wall time of the rendering phase.
-    timing_s : seconds per stage summed over the shards rendered here (``render``,
-        ``labels``, ``write``: compression and I/O), across all workers.
+    timing_s : seconds per stage (:data:`TIMING_KEYS`) summed over the shards rendered
+        here, across all workers and threads; stages that run side by side (a shard is
+        written while the next is rendered) sum to more than ``seconds``.
     """
 
     path: Path
@@ -136,6 +157,63 @@ def _randomiser(path: str, digest: str) -> Randomiser:
     return Randomiser(config, Path(path) / ASSETS_DIR)
 
 
+def _fill_shard(
+    store: DatasetStore,
+    randomiser: Randomiser,
+    shard: int,
+    num_samples: int,
+    buffer: dict[str, np.ndarray],
+    on_sample: Callable[[], None] | None,
+) -> tuple[list[dict[str, Any]], dict[str, float]]:
+    """Render and label a shard's samples into ``buffer`` (:meth:`DatasetStore.shard_buffer`,
+    slot ``k`` = the shard's ``k``-th sample). Returns their metadata and the seconds spent
+    (``render``, ``labels``)."""
+    start, stop = store.shard_bounds(shard, num_samples)
+    cam = randomiser.rig.camera.intrinsics
+    threads = 1 if cam.width * cam.height <= _SMALL_IMAGE_PIXELS else None
+    timing = {"render": 0.0, "labels": 0.0}
+    metas = []
+    for slot, index in enumerate(range(start, stop)):
+        t0 = time.perf_counter()
+        spec = randomiser.sample(index)
+        capture = spec.scanner.capture(
+            spec.scene, cam2world=spec.cam2world, rng=spec.capture_seed, command=[],
+            threads=threads,
+        )  # fmt: skip
+        capture.frames  # noqa: B018 - rendered frames are materialised here (timing)
+        t1 = time.perf_counter()
+        out = {name: block[slot] for name, block in buffer.items()}
+        sample_arrays(capture, spec, store.layout, out)
+        metas.append(sample_meta(spec, capture))
+        t2 = time.perf_counter()
+        timing["render"] += t1 - t0
+        timing["labels"] += t2 - t1
+        if on_sample is not None:
+            on_sample()
+    return metas, timing
+
+
+def _open(path: str | Path, digest: str) -> tuple[DatasetStore, Randomiser]:
+    store = DatasetStore.open(path)
+    if store.digest != digest:
+        raise InputError("store", f"the dataset {digest}", store.digest)
+    return store, _randomiser(str(path), digest)
+
+
+def _shard_buffer(store: DatasetStore) -> dict[str, np.ndarray]:
+    """A shard buffer, kept from one task to the next in a worker process (fresh memory
+    costs page faults, and on a virtual machine often more: the host may have taken freed
+    pages back), new in any other process (nothing is held after :func:`generate`)."""
+    global _WORKER_BUFFER
+    if not _IN_WORKER:
+        return store.shard_buffer(store.shard_samples)
+    key = (str(store.path), store.digest)
+    if _WORKER_BUFFER is None or _WORKER_BUFFER[0] != key:
+        _WORKER_BUFFER = None  # the old one is freed before the new one is made
+        _WORKER_BUFFER = (key, store.shard_buffer(store.shard_samples))
+    return _WORKER_BUFFER[1]
+
+
 def render_shard(
     path: str | Path,
     shard: int,
@@ -155,42 +233,74 @@ def render_shard(
 
     Returns
     -------
-    ``{"shard", "samples", "timing_s": {"render", "labels", "write"}}``.
+    ``{"shard", "samples", "timing_s"}``, ``timing_s`` with the keys of
+    :data:`TIMING_KEYS`.
     """
-    store = DatasetStore.open(path)
-    if store.digest != digest:
-        raise InputError("store", f"the dataset {digest}", store.digest)
-    randomiser = _randomiser(str(path), digest)
-    start, stop = store.shard_bounds(shard, num_samples)
-    cam = randomiser.rig.camera.intrinsics
-    threads = 1 if cam.width * cam.height <= _SMALL_IMAGE_PIXELS else None
-    timing = {"render": 0.0, "labels": 0.0, "write": 0.0}
-    samples, metas = [], []
-    for index in range(start, stop):
-        t0 = time.perf_counter()
-        spec = randomiser.sample(index)
-        capture = spec.scanner.capture(
-            spec.scene, cam2world=spec.cam2world, rng=spec.capture_seed, command=[],
-            threads=threads,
-        )  # fmt: skip
-        capture.frames  # noqa: B018 - rendered frames are materialised here (timing)
-        t1 = time.perf_counter()
-        samples.append(sample_arrays(capture, spec, store.layout))
-        metas.append(sample_meta(spec, capture))
-        t2 = time.perf_counter()
-        timing["render"] += t1 - t0
-        timing["labels"] += t2 - t1
-        if on_sample is not None:
-            on_sample()
-    t3 = time.perf_counter()
-    store.write_shard(shard, samples, metas)
-    timing["write"] += time.perf_counter() - t3
-    return {"shard": shard, "samples": stop - start, "timing_s": timing}
+    store, randomiser = _open(path, digest)
+    buffer = _shard_buffer(store)
+    metas, timing = _fill_shard(store, randomiser, shard, num_samples, buffer, on_sample)
+    return _result(shard, metas, timing, store.write_shard(shard, buffer, metas), 0.0)
+
+
+def _result(
+    shard: int,
+    metas: list[dict[str, Any]],
+    timing: dict[str, float],
+    write: dict[str, float],
+    wait: float,
+) -> dict[str, Any]:
+    """A shard task's result: its stage seconds (:data:`TIMING_KEYS`)."""
+    stages = {
+        **timing,
+        "checksum": write["checksum"],
+        "compression": write["compression"],
+        "io": write["io"],
+        "write": write["wall"],
+        "write_wait": wait,
+    }
+    return {"shard": shard, "samples": len(metas), "timing_s": stages}
+
+
+def _run_pipelined(
+    path: Path, shards: list[int], num: int, digest: str, tick: Callable
+) -> Iterator[dict[str, Any]]:
+    """Shards in this process, each written on a background thread while the next one is
+    rendered into a second buffer (checksums, compression and file writes release the
+    GIL). At most one write is in flight, so a shard's record still follows its data and
+    an interrupted run leaves what the sequential order would."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    store, randomiser = _open(path, digest)
+    buffers: list[dict[str, np.ndarray]] = []
+    pending = None
+
+    def finish(job: tuple[Any, ...]) -> dict[str, Any]:
+        future, shard, metas, timing = job
+        begin = time.perf_counter()
+        write = future.result()
+        return _result(shard, metas, timing, write, time.perf_counter() - begin)
+
+    with ThreadPoolExecutor(1, thread_name_prefix="virtus-shard-writer") as writer:
+        for number, shard in enumerate(shards):
+            if len(buffers) < 2:
+                buffers.append(store.shard_buffer(store.shard_samples))
+            # this buffer's previous write was awaited before the last submission
+            buffer = buffers[number % 2]
+            metas, timing = _fill_shard(
+                store, randomiser, shard, num, buffer, on_sample=lambda: tick(1)
+            )
+            if pending is not None:
+                yield finish(pending)
+            pending = (writer.submit(store.write_shard, shard, buffer, metas), shard, metas, timing)
+        if pending is not None:
+            yield finish(pending)
 
 
 def _worker_init() -> None:
     """In a spawned worker: die with the parent (Linux), so a killed ``generate`` leaves no
-    orphan writing into the store."""
+    orphan writing into the store; keep one shard buffer from task to task."""
+    global _IN_WORKER
+    _IN_WORKER = True
     try:
         import ctypes
         import signal
@@ -201,8 +311,12 @@ def _worker_init() -> None:
 
 
 def _run_local(
-    path: Path, shards: list[int], num: int, digest: str, workers: int, tick: Callable
-) -> Iterator[dict[str, Any]]:
+    path: Path, shards: list[int], num: int, digest: str, workers: int, tick: Callable,
+    pipelined: bool,
+) -> Iterator[dict[str, Any]]:  # fmt: skip
+    if workers == 1 and pipelined:
+        yield from _run_pipelined(path, shards, num, digest, tick)
+        return
     if workers == 1:
         for shard in shards:
             yield render_shard(path, shard, num, digest, on_sample=lambda: tick(1))
@@ -329,10 +443,12 @@ def generate(
 
         if progress is not None:
             progress(complete, target, 0)
-        timing = {"render": 0.0, "labels": 0.0, "write": 0.0}
+        timing = dict.fromkeys(TIMING_KEYS, 0.0)
         start = time.perf_counter()
         if ray is None:
-            results = _run_local(out, todo, target, store.digest, workers, tick)
+            # two shards in memory when one is written while the next is rendered
+            pipelined = 2 * shard_bytes <= MAX_SHARD_BYTES
+            results = _run_local(out, todo, target, store.digest, workers, tick, pipelined)
         else:
             results = _run_ray(out, todo, target, store.digest, ray, workers, tick)
         for result in results:

@@ -42,7 +42,9 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -52,6 +54,7 @@ import numpy as np
 from virtus import __version__
 from virtus.capture import UNITS as CAPTURE_UNITS
 from virtus.data.labels import ArraySpec, sample_checksum
+from virtus.data.shards import ShardEncoder
 from virtus.errors import InputError, VirtusError
 from virtus.runs import config_digest, first_difference, write_json_atomic
 from virtus.safeio import read_json
@@ -79,6 +82,9 @@ SAMPLES_DIR = "samples"
 UNITS = CAPTURE_UNITS
 #: Largest shard record read (bytes): ~10 kB of metadata per sample, 1024 samples.
 _MAX_RECORD_BYTES = 64 << 20
+#: Threads that checksum and compress a shard while it is written (the work releases the
+#: GIL; more threads than cores only add memory in flight).
+_WRITE_THREADS = max(1, min(4, os.cpu_count() or 1))
 #: Files a store may hold besides its own (checked before a directory becomes a store).
 _IGNORED = (".virtus.lock", ".virtus-tmp")
 
@@ -92,6 +98,13 @@ def _codec(name: str, level: int) -> Any:
         return ZstdCodec(level=level)
     cname = name.removeprefix("blosc-")
     return BloscCodec(cname=cname, clevel=level, shuffle="shuffle")
+
+
+def _timed(work: Callable[..., Any], *args: Any) -> tuple[Any, float]:
+    """``(work(*args), seconds it took)``."""
+    begin = time.perf_counter()
+    value = work(*args)
+    return value, time.perf_counter() - begin
 
 
 @dataclass
@@ -143,6 +156,7 @@ class DatasetStore:
         self.shard_samples: int = int(description["config"]["storage"]["shard_samples"])
         self.digest: str = description["identity_digest"]
         self._arrays: dict[str, Any] = {}
+        self._encoders: dict[str, ShardEncoder | None] = {}
         self._pid = os.getpid()
 
     # -- opening --------------------------------------------------------------------------
@@ -290,33 +304,88 @@ class DatasetStore:
                 todo.append(shard)
         return todo
 
+    def shard_buffer(self, count: int) -> dict[str, np.ndarray]:
+        """Uninitialised arrays for ``count`` samples of a shard: name -> (count, *shape) of
+        the layout's dtype (fill them with :func:`virtus.data.labels.sample_arrays`, one
+        sample slot at a time, then :meth:`write_shard`; reusable for the next shard)."""
+        return {a.name: np.empty((count, *a.shape), dtype=a.dtype) for a in self.layout}
+
     def write_shard(
-        self, shard: int, samples: list[dict[str, np.ndarray]], metas: list[dict[str, Any]]
-    ) -> None:
+        self, shard: int, arrays: dict[str, np.ndarray], metas: list[dict[str, Any]]
+    ) -> dict[str, float]:
         """Write one shard's samples (consecutive, from the shard's first index), then its
-        record. Each sample's ``checksum`` is computed here and added to its metadata."""
+        record. Each sample's ``checksum`` is computed here and added to its metadata.
+
+        Parameters
+        ----------
+        shard : the shard number.
+        arrays : name -> (n, *shape) block of the layout's dtype, sample ``k`` of the shard
+            at ``[k]`` (:meth:`shard_buffer`); rows past ``n = len(metas)`` are ignored.
+        metas : the ``n`` samples' metadata (:func:`virtus.data.generate.sample_meta`).
+
+        Returns
+        -------
+        Seconds spent: ``checksum`` and ``compression`` (work summed over the threads that
+        do it side by side), ``io`` (writing the files and the record), ``wall`` (the call).
+        """
+        start_time = time.perf_counter()
         start = shard * self.shard_samples
-        if not samples or len(samples) > self.shard_samples or len(samples) != len(metas):
-            raise InputError(
-                "samples", f"1..{self.shard_samples} samples with metadata", len(samples)
-            )
-        for arrays, meta in zip(samples, metas, strict=True):
-            meta["checksum"] = sample_checksum(arrays, self.layout)
-        if self.storage == "zarr":
-            arrays = self._zarr_arrays()
-            for spec in self.layout:
-                block = np.stack([s[spec.name] for s in samples])
-                arrays[spec.name][start : start + len(samples)] = block
-        else:
-            for offset, (arrays, meta) in enumerate(zip(samples, metas, strict=True)):
-                self._png_write(start + offset, arrays, int(meta["n_frames"]))
+        count = len(metas)
+        if not 1 <= count <= self.shard_samples or any(
+            arrays[a.name].shape[0] < count for a in self.layout
+        ):
+            raise InputError("samples", f"1..{self.shard_samples} samples with metadata", count)
+        samples = [{a.name: arrays[a.name][k] for a in self.layout} for k in range(count)]
+        timing = {"checksum": 0.0, "compression": 0.0, "io": 0.0}
+
+        def result(future: Any, stage: str) -> Any:
+            value, seconds = future.result()
+            timing[stage] += seconds
+            return value
+
+        # SHA-256 and the compressors release the GIL: checksums and chunks are computed on
+        # a few threads while this one writes each array's shard as soon as it is encoded.
+        with ThreadPoolExecutor(_WRITE_THREADS) as pool:
+            checksums = [
+                pool.submit(_timed, sample_checksum, arrays_k, self.layout) for arrays_k in samples
+            ]
+            io_start = time.perf_counter()
+            if self.storage == "zarr":
+                encoders = self._shard_encoders()
+                encoded = {
+                    name: [pool.submit(_timed, encoder.encode, s[name]) for s in samples]
+                    for name, encoder in encoders.items()
+                    if encoder is not None
+                }
+                zarr_arrays = self._zarr_arrays()
+                for spec in self.layout:
+                    encoder = encoders[spec.name]
+                    if encoder is not None:
+                        chunks = [result(f, "compression") for f in encoded[spec.name]]
+                        io_start = time.perf_counter()
+                        encoder.write(shard, chunks)
+                        timing["io"] += time.perf_counter() - io_start
+                    else:  # a layout the direct writer does not handle: through Zarr
+                        io_start = time.perf_counter()
+                        zarr_arrays[spec.name][start : start + count] = arrays[spec.name][:count]
+                        timing["io"] += time.perf_counter() - io_start
+            else:
+                for offset, (arrays_k, meta) in enumerate(zip(samples, metas, strict=True)):
+                    self._png_write(start + offset, arrays_k, int(meta["n_frames"]))
+                timing["io"] += time.perf_counter() - io_start
+            for meta, future in zip(metas, checksums, strict=True):
+                meta["checksum"] = result(future, "checksum")
         record = {
             "format": SHARD_FORMAT,
             "dataset": self.digest,
             "shard": shard,
             "samples": metas,
         }
+        io_start = time.perf_counter()
         write_json_atomic(self._record_path(shard), record)
+        timing["io"] += time.perf_counter() - io_start
+        timing["wall"] = time.perf_counter() - start_time
+        return timing
 
     # -- reading --------------------------------------------------------------------------
 
@@ -424,6 +493,17 @@ class DatasetStore:
                 attributes={"unit": spec.unit, "channels": list(spec.channels)},
             )
         self._arrays = {}
+        self._encoders = {}
+
+    def _shard_encoders(self) -> dict[str, ShardEncoder | None]:
+        """Name -> the direct shard writer of each array (None: written through Zarr)."""
+        if not self._encoders or self._pid != os.getpid():
+            arrays = self._zarr_arrays()
+            self._encoders = {
+                name: ShardEncoder.for_array(array, self.path / name)
+                for name, array in arrays.items()
+            }
+        return self._encoders
 
     def _zarr_arrays(self) -> dict[str, Any]:
         import zarr

@@ -1,0 +1,204 @@
+"""Zarr v3 shard files encoded and written directly: the write path of a dataset store.
+
+A shard of a Zarr v3 array with the ``sharding_indexed`` codec is one file: its inner chunks,
+each encoded by the chunk codecs (``bytes``, then a compressor), one after another in
+(Morton) chunk order, then the index -- ``(offset, nbytes)`` as little-endian uint64 per
+chunk, ``2**64 - 1`` twice for a chunk that is absent or holds only the fill value -- and
+the index's CRC-32C as a little-endian uint32. :class:`ShardEncoder` writes exactly the bytes
+Zarr writes for a whole shard (tests/test_dataset.py compares them), and Zarr reads the
+files back as its own. Zarr's own write path costs about twice the compression on top
+(an async task per chunk, fill-value comparisons through full-size temporaries, a
+concatenated copy of the shard), which a dataset generator would pay for every byte.
+
+Handled layouts (those :class:`virtus.data.store.DatasetStore` creates): chunks of one
+element along the first axis and the full extent on the others, the index at the end with
+the ``bytes`` + ``crc32c`` index codecs, chunk codecs ``bytes`` (little endian) then
+``blosc``, ``zstd`` or nothing. :meth:`ShardEncoder.for_array` returns None for any other
+array (the caller writes through Zarr).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from virtus.runs import atomic_write
+
+__all__ = ["ShardEncoder"]
+
+#: Index entry of an absent chunk (offset and length).
+_ABSENT = np.uint64(2**64 - 1)
+#: Elements compared per step when a chunk is tested for "only the fill value" (the test
+#: stops at the first block with another value: one block for almost every chunk).
+_FILL_BLOCK = 1 << 18
+_BLOSC_SHUFFLE = {"noshuffle": 0, "shuffle": 1, "bitshuffle": 2}
+
+
+def _compressor(codec: dict[str, Any]) -> Any:
+    """The numcodecs codec that Zarr uses for a chunk codec's JSON (``blosc``, ``zstd``);
+    ``False`` for one this module does not handle."""
+    name, config = codec["name"], codec.get("configuration", {})
+    if name == "blosc":
+        from numcodecs import Blosc
+
+        return Blosc(
+            cname=config["cname"],
+            clevel=int(config["clevel"]),
+            shuffle=_BLOSC_SHUFFLE[config["shuffle"]],
+            blocksize=int(config.get("blocksize", 0)),
+            typesize=int(config["typesize"]),
+        )
+    if name == "zstd":
+        from numcodecs import Zstd
+
+        return Zstd(level=int(config["level"]), checksum=bool(config.get("checksum", False)))
+    return False
+
+
+def _little_endian_bytes(codec: dict[str, Any]) -> bool:
+    """Whether a codec's JSON is ``bytes`` in little-endian order (or without an order:
+    one-byte dtypes)."""
+    endian = codec.get("configuration", {}).get("endian", "little")
+    return codec["name"] == "bytes" and endian == "little"
+
+
+@dataclass(frozen=True)
+class ShardEncoder:
+    """Encodes and writes whole shards of one Zarr v3 array (module docstring).
+
+    Attributes
+    ----------
+    folder : the array's folder (holds its ``zarr.json``).
+    chunk_shape : per-chunk shape (1 along the first axis, the array's extent elsewhere).
+    chunks_per_shard : chunks (first-axis elements) per shard.
+    dtype : the array's dtype, little endian (the ``bytes`` codec's order).
+    fill : the fill value (a chunk equal to it everywhere is not stored; NaN equals NaN).
+    compressor : numcodecs codec applied after ``bytes`` (None: stored raw).
+    key : shard number -> its key below ``folder`` (``"c/3/0/0"``).
+    """
+
+    folder: Path
+    chunk_shape: tuple[int, ...]
+    chunks_per_shard: int
+    dtype: np.dtype
+    fill: Any
+    compressor: Any
+    key: Callable[[int], str]
+
+    @classmethod
+    def for_array(cls, array: Any, folder: str | Path) -> ShardEncoder | None:
+        """The encoder of a ``zarr.Array`` stored in ``folder``; None if its layout is not
+        one this module writes (module docstring)."""
+        meta = array.metadata
+        codecs = meta.to_dict()["codecs"]
+        if getattr(meta, "zarr_format", None) != 3 or len(codecs) != 1:
+            return None
+        sharding = codecs[0]
+        if sharding["name"] != "sharding_indexed":
+            return None
+        config = sharding["configuration"]
+        shard_shape = tuple(array.shards or ())
+        chunk_shape = tuple(config["chunk_shape"])
+        inner = list(config["codecs"])
+        index = [c["name"] for c in config["index_codecs"]]
+        if (
+            config.get("index_location", "end") != "end"
+            or index != ["bytes", "crc32c"]
+            or not _little_endian_bytes(config["index_codecs"][0])
+            or not inner
+            or not _little_endian_bytes(inner[0])
+            or len(inner) > 2
+            or chunk_shape[0] != 1
+            or chunk_shape[1:] != tuple(array.shape[1:])
+            or shard_shape[1:] != chunk_shape[1:]
+        ):
+            return None
+        compressor = _compressor(inner[1]) if len(inner) == 2 else None
+        if compressor is False:
+            return None
+        dtype = np.dtype(array.dtype).newbyteorder("<")
+        fill = np.asarray(array.fill_value, dtype=dtype)[()]
+        dims = len(chunk_shape) - 1
+        return cls(
+            Path(folder), chunk_shape, shard_shape[0], dtype, fill, compressor,
+            lambda shard: meta.encode_chunk_key((shard, *([0] * dims))),
+        )  # fmt: skip
+
+    def path(self, shard: int) -> Path:
+        """The file of shard ``shard``."""
+        return self.folder / self.key(shard)
+
+    def is_fill(self, chunk: np.ndarray) -> bool:
+        """Whether ``chunk`` holds only the fill value (Zarr then stores nothing for it)."""
+        flat = chunk.reshape(-1)
+        nan = self.dtype.kind == "f" and np.isnan(self.fill)
+        for start in range(0, flat.size, _FILL_BLOCK):
+            part = flat[start : start + _FILL_BLOCK]
+            if nan:
+                if not np.isnan(part).all():
+                    return False
+            elif self.dtype.kind == "f":  # bit patterns, as Zarr compares (-0.0 is not 0.0)
+                pattern = np.asarray(self.fill, self.dtype).view(f"u{self.dtype.itemsize}")
+                if (part.view(pattern.dtype) != pattern).any():
+                    return False
+            elif (part != self.fill).any():
+                return False
+        return True
+
+    def encode(self, chunk: np.ndarray) -> bytes | memoryview | None:
+        """One chunk's stored bytes; None for a chunk of only the fill value.
+
+        Parameters
+        ----------
+        chunk : ``chunk_shape`` (or its shape without the leading 1) of the array's dtype.
+        """
+        if chunk.size != int(np.prod(self.chunk_shape)):
+            raise ValueError(f"chunk of {chunk.size} elements, expected {self.chunk_shape}")
+        if self.is_fill(chunk):
+            return None
+        raw = np.ascontiguousarray(chunk, dtype=self.dtype).reshape(-1).view(np.uint8)
+        if self.compressor is None:
+            return memoryview(raw)
+        return self.compressor.encode(raw)
+
+    def index(self, encoded: Sequence[bytes | memoryview | None]) -> bytes:
+        """The shard index with its CRC-32C for ``encoded`` chunks (in chunk order)."""
+        import google_crc32c
+
+        table = np.full((self.chunks_per_shard, 2), _ABSENT, dtype="<u8")
+        offset = 0
+        for position, data in enumerate(encoded):
+            if data is not None and len(data):
+                table[position] = (offset, len(data))
+                offset += len(data)
+        raw = table.tobytes()
+        return raw + np.uint32(google_crc32c.value(raw)).astype("<u4").tobytes()
+
+    def write(self, shard: int, encoded: Sequence[bytes | memoryview | None]) -> int:
+        """Write shard ``shard`` atomically from its encoded chunks (chunk order; the shard's
+        first ``len(encoded)`` chunks, the rest absent); removes the file when every chunk
+        is absent, as Zarr does. Returns the bytes written."""
+        if len(encoded) > self.chunks_per_shard:
+            raise ValueError(f"{len(encoded)} chunks for a shard of {self.chunks_per_shard}")
+        path = self.path(shard)
+        present = [data for data in encoded if data is not None and len(data)]
+        if not present:
+            with contextlib.suppress(FileNotFoundError):
+                path.unlink()
+            return 0
+        index = self.index(list(encoded))
+
+        def fill(tmp: Path) -> None:
+            with open(tmp, "wb") as handle:
+                for data in present:
+                    handle.write(data)
+                handle.write(index)
+
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write(path, fill)
+        return sum(len(d) for d in present) + len(index)
