@@ -16,17 +16,17 @@ reading the frames even on GPUs with slow float64, and every decision of the hos
 comes out the same but for exact ties. Measured on noisy, partly dark 960 x 960 frames of
 twelve sequences: phases within 6e-14 rad, identical fringe orders, masks and flags except
 where integer frames put a decision exactly on its edge in exact arithmetic (6 steps give
-phases of exact multiples of pi / 3, and a multi-wavelength residual of exactly pi / 2), which
-the host's and the device's last-bit rounding then settle either way: 6 of 1.8e6 pixels,
-for the multi-wavelength sequence only. ``precision="float32"`` rounds the sums of up to a
-few thousand DN and the absolute phase (one float32 unit is 3e-5 rad at 320 rad): phases
-agree to 1e-5 rad RMS, 4e-5 rad at most, and pixels that close to a decision edge decide
-either way: 2.4e-5 of the pixels in the masks and flags of temporal and heterodyne decodes
-(residual limits), 2e-6 in the fringe orders of codes without the complementary frame (the
-branch edge, where the host is as arbitrary). In both precisions the code threshold ``(mean
-white + mean black) / 2`` or the phase background is formed and compared in float64 from
-exact integer sums, and the saturation test compares integers, so code bits are read exactly
-as on the host.
+phases of exact multiples of pi / 6, and a multi-wavelength residual of exactly pi / 2),
+which the host's and the device's last-bit rounding then settle either way: 6 (llvm) and 9
+(cuda, H100) of 1.8e6 pixels, for the multi-wavelength sequence only.
+``precision="float32"`` rounds the sums of up to a few thousand DN and the absolute phase
+(one float32 unit is 3e-5 rad at 320 rad): phases agree to 1e-5 rad RMS, 4e-5 rad at most,
+and pixels that close to a decision edge decide either way: 2.4e-5 of the pixels in the
+masks and flags of temporal and heterodyne decodes (residual limits), 2e-6 in the fringe
+orders of codes without the complementary frame (the branch edge, where the host is as
+arbitrary). In both precisions the code threshold ``(mean white + mean black) / 2`` or the
+phase background is formed and compared in float64 from exact integer sums, and the
+saturation test compares integers, so code bits are read exactly as on the host.
 """
 
 from __future__ import annotations
