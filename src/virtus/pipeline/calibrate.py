@@ -55,11 +55,14 @@ byte that of an uninterrupted run. :func:`recalibrate` solves again from the pos
 
 from __future__ import annotations
 
+import collections
 import contextlib
+import os
 import re
 import time
 import warnings
 from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -255,6 +258,22 @@ def observe_pose(capture: Capture, board: Board, name: str) -> PoseObservation:
     centroids = refine_points(uniform, board, centres)
     homographies = local_homographies(decoded.proj_uv, board, centres)
     return PoseObservation(name, centroids, homographies)
+
+
+#: Most threads observing poses while others render (each holds one pose's capture).
+MAX_OBSERVE_WORKERS = 8
+
+
+def observe_workers() -> int:
+    """Threads that observe poses: one per CPU beyond the one rendering, 1 to
+    :data:`MAX_OBSERVE_WORKERS`."""
+    return max(1, min(MAX_OBSERVE_WORKERS, (os.cpu_count() or 1) - 1))
+
+
+def _observe_timed(capture: Capture, board: Board, name: str) -> tuple[PoseObservation, float]:
+    """:func:`observe_pose` and the seconds it took (in its worker thread)."""
+    start = time.perf_counter()
+    return observe_pose(capture, board, name), time.perf_counter() - start
 
 
 def pose_seed(seed: int, index: int) -> int:
@@ -541,28 +560,50 @@ def _run_episode(
         run.own(EPISODE_FILE, *pose_files, *RESULT_FILES, TIMING_FILE)
         # Same bytes as the first run's when resuming (the configuration is the same).
         run.write_json(EPISODE_FILE, episode)
-    observations = []
-    for index, pose in enumerate(pose_list):
-        seed = episode["pose_seeds"][index]
-        name = f"{POSE_DIR}/{pose.name}.npz"
-        if run is not None and run.resumed and run.file(name).is_file():
-            observations.append(_load_observation(run.file(name), pose, seed, digest))
-            run.log(f"reused {pose.name}")
-        else:
-            start = time.perf_counter()
-            capture = scanner.capture(board_scene(board, pose, texture), rng=seed)
-            middle = time.perf_counter()
-            obs = observe_pose(capture, board, pose.name)
-            timing["render_s"] += middle - start
-            timing["observe_s"] += time.perf_counter() - middle
-            observations.append(obs)
-            if run is not None:
-                run.write(
-                    name, partial(_save_observation, pose=pose, seed=seed, episode=digest, obs=obs)
-                )
-                run.log(f"rendered {pose.name}")
+    observations: list[PoseObservation] = []
+    # Poses are rendered here, one after the other (the renderer uses the whole device),
+    # and observed in worker threads (detection and decoding run in OpenCV and numpy,
+    # which release the GIL) while the next poses render. Results are taken in pose order,
+    # so the files, the log and the result are those of a sequential run.
+    pending: collections.deque = collections.deque()
+
+    def finish_oldest() -> None:
+        index, pose, seed, future = pending.popleft()
+        obs, seconds = future.result()
+        timing["observe_s"] += seconds
+        observations.append(obs)
+        if run is not None:
+            name = f"{POSE_DIR}/{pose.name}.npz"
+            run.write(
+                name, partial(_save_observation, pose=pose, seed=seed, episode=digest, obs=obs)
+            )
+            run.log(f"rendered {pose.name}")
         if progress is not None:
             progress(index + 1, len(pose_list), pose.name)
+
+    workers = observe_workers()
+    with ThreadPoolExecutor(workers, thread_name_prefix="observe") as pool:
+        for index, pose in enumerate(pose_list):
+            seed = episode["pose_seeds"][index]
+            name = f"{POSE_DIR}/{pose.name}.npz"
+            if run is not None and run.resumed and run.file(name).is_file():
+                while pending:
+                    finish_oldest()
+                observations.append(_load_observation(run.file(name), pose, seed, digest))
+                run.log(f"reused {pose.name}")
+                if progress is not None:
+                    progress(index + 1, len(pose_list), pose.name)
+                continue
+            start = time.perf_counter()
+            capture = scanner.capture(board_scene(board, pose, texture), rng=seed)
+            timing["render_s"] += time.perf_counter() - start
+            pending.append(
+                (index, pose, seed, pool.submit(_observe_timed, capture, board, pose.name))
+            )
+            while len(pending) > workers:  # bounds the captures held in memory
+                finish_oldest()
+        while pending:
+            finish_oldest()
     result = _solve(episode, board, pose_list, observations, timing)
     if run is not None:
         result.save(run.path)
