@@ -2,19 +2,28 @@
 
 Generates ``--samples`` samples of a training configuration on the paper's rig (960 x 960
 camera, the paper's 52-frame sequence, 1 spp, ideal sensor and projector, one sphere or box
-before a plane) with :func:`virtus.data.generate` in this process, then reports in one run:
+before a plane) with :func:`virtus.data.generate`, once per ``--workers`` value (e.g.
+``--workers 1 2``), and reports in one run:
 
-* images/s written (frames of all samples / wall time of the generation), and samples/s;
-* the per-stage split summed over the samples: render (trace + synthesis of every frame),
-  labels (ground truth -> phase, order, numerator/denominator, masks, object ids), write
-  (Zarr shard encoding + file I/O), with compression timed alone on the same arrays
-  (the rest of write is I/O and Zarr overhead);
+* images/s written (frames of all samples / wall time of the generation), samples/s, the
+  bytes on disk, and the load average before and after each generation;
+* the per-stage split (:data:`virtus.data.generate.TIMING_KEYS`), seconds summed over the
+  samples: render (trace + synthesis of every frame), labels (ground truth -> phase, order,
+  numerator/denominator, modulation, masks, object ids), checksum (SHA-256 of every stored
+  byte), compression (chunk encoding), io (shard files and records), write_wait (rendering
+  held up by the shard writer). With one worker a shard is written on a background thread
+  while the next is rendered, and checksums and compression run on several threads: the
+  stages overlap, so they sum to more than the wall time;
 * for context, the renderer alone on the same scenes (``Scanner.capture``, frames/s): the
-  ceiling a dataset run can reach on this machine.
+  ceiling a dataset run can reach on this machine;
+* with ``--codecs``, every codec and level on one stored sample: compression seconds on one
+  thread and compressed bytes (speed against size).
 
-    PYTHONPATH=src python benchmarks/bench_dataset.py [--samples 8] [--json out.json]
+    PYTHONPATH=src python benchmarks/bench_dataset.py [--samples 8] [--workers 1 2] [--codecs]
+        [--json out.json]
 
-Not a test: numbers depend on the machine and its load (quote them with its description).
+Not a test: numbers depend on the machine and its load (quote them with the load average;
+on a shared machine compare old and new code back to back).
 """
 
 from __future__ import annotations
@@ -23,18 +32,22 @@ import argparse
 import json
 import os
 import platform
+import sys
 import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 import yaml
 
 from virtus.data import DatasetStore, generate, load_config
+from virtus.data.config import CODECS
+from virtus.data.generate import TIMING_KEYS
 from virtus.data.sampling import Randomiser
+from virtus.data.shards import ShardEncoder
+from virtus.data.store import _codec
 
 
-def config_file(folder: Path, samples: int, shard: int, codec: str, dtype: str) -> Path:
+def config_file(folder: Path, samples: int, shard: int, codec: str, level: int, dtype: str) -> Path:
     data = {
         "mode": "training",
         "seed": 0,
@@ -47,92 +60,163 @@ def config_file(folder: Path, samples: int, shard: int, codec: str, dtype: str) 
             ]
         },
         "planes": {"count": [1, 1]},
-        "storage": {"shard_samples": shard, "codec": codec, "level": 1, "label_dtype": dtype},
+        "storage": {
+            "shard_samples": shard,
+            "codec": codec,
+            "level": level,
+            "label_dtype": dtype,
+        },
     }
     path = folder / "bench.yaml"
     path.write_text(yaml.safe_dump(data))
     return path
 
 
-def compression_seconds(store: DatasetStore, codec: str, level: int, samples: int) -> float:
-    """Seconds to compress ``samples`` samples' arrays with the store's codec alone."""
-    from numcodecs import Blosc, Zstd
+def load() -> float:
+    """The 1-minute load average."""
+    return round(os.getloadavg()[0], 2)
 
-    if codec == "none":
-        return 0.0
-    compressor = (
-        Zstd(level=level)
-        if codec == "zstd"
-        else Blosc(cname=codec.removeprefix("blosc-"), clevel=level, shuffle=Blosc.SHUFFLE)
-    )
-    arrays = store.read_sample(0)
+
+def renderer_only(config, folder: Path, samples: int) -> float:
+    """Frames/s of ``Scanner.capture`` alone on the benchmark's samples (after a warm-up
+    capture: the first kernel compilation)."""
+    randomiser = Randomiser(config, folder / "assets")
+    spec = randomiser.sample(0)
+    spec.scanner.capture(spec.scene, rng=spec.capture_seed).frames  # noqa: B018
     start = time.perf_counter()
-    for array in arrays.values():
-        compressor.encode(np.ascontiguousarray(array))
-    return (time.perf_counter() - start) * samples
+    frames = 0
+    for index in range(samples):
+        spec = randomiser.sample(index)
+        capture = spec.scanner.capture(spec.scene, cam2world=spec.cam2world, rng=spec.capture_seed)
+        frames += len(capture.frames)
+    return frames / (time.perf_counter() - start)
+
+
+def codec_table(store: DatasetStore) -> list[dict]:
+    """Every codec and level on sample 0's arrays (one thread, as the store encodes one
+    chunk per thread): seconds and bytes."""
+    import zarr
+
+    sample = store.read_sample(0)
+    raw = sum(a.nbytes for a in sample.values())
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        group = zarr.open_group(tmp, mode="w")
+        for codec in CODECS:
+            for level in (1, 3, 5) if codec != "none" else (0,):
+                seconds, size = 0.0, 0
+                for spec in store.layout:
+                    array = group.create_array(
+                        f"{codec}_{level}_{spec.name}", shape=(1, *spec.shape),
+                        chunks=(1, *spec.shape), shards=(1, *spec.shape), dtype=spec.dtype,
+                        fill_value=spec.fill, compressors=_codec(codec, level),
+                    )  # fmt: skip
+                    encoder = ShardEncoder.for_array(array, Path(tmp) / array.name)
+                    start = time.perf_counter()
+                    data = encoder.encode(sample[spec.name])
+                    seconds += time.perf_counter() - start
+                    size += 0 if data is None else len(data)
+                rows.append(
+                    {
+                        "codec": codec,
+                        "level": level,
+                        "seconds_per_sample": round(seconds, 3),
+                        "mb_per_s": round(raw / seconds / 1e6, 1) if seconds else None,
+                        "bytes_per_sample": size,
+                        "ratio": round(raw / size, 2),
+                    }
+                )
+    return rows
+
+
+def run(config, folder: Path, samples: int, workers: int, frames_per_sample: int) -> dict:
+    """One generation into a new store: rate, stage seconds, bytes."""
+    store_path = folder / f"store_w{workers}"
+    load_before = load()
+    report = generate(config, store_path, workers=workers)
+    load_after = load()
+    store = DatasetStore.open(store_path)
+    stages = {key: round(report.timing_s.get(key, 0.0), 3) for key in TIMING_KEYS}
+    return {
+        "workers": workers,
+        "load_average_before": load_before,
+        "load_average_after": load_after,
+        "images_per_s": round(samples * frames_per_sample / report.seconds, 2),
+        "samples_per_s": round(samples / report.seconds, 3),
+        "seconds": round(report.seconds, 3),
+        "stage_s": stages,
+        "stage_s_per_sample": {k: round(v / samples, 3) for k, v in stages.items()},
+        "bytes_raw": samples * sum(a.nbytes for a in store.layout),
+        "bytes_on_disk": sum(p.stat().st_size for p in store_path.rglob("*") if p.is_file()),
+    }
+
+
+def summary(result: dict) -> str:
+    lines = [
+        f"{result['machine']}; {result['image_px']} px, {result['frames_per_sample']} frames a "
+        f"sample, {result['samples']} samples, codec {result['codec']} level {result['level']}",
+        f"renderer alone: {result['renderer_only_images_per_s']:.1f} images/s "
+        f"(load {result['renderer_load_average']})",
+    ]
+    for entry in result["runs"]:
+        stages = entry["stage_s"]
+        split = ", ".join(f"{k} {stages[k]:.2f}" for k in TIMING_KEYS if k != "write")
+        lines.append(
+            f"workers {entry['workers']}: {entry['images_per_s']:.1f} images/s "
+            f"({entry['seconds']:.2f} s; load {entry['load_average_before']} -> "
+            f"{entry['load_average_after']}); stage seconds: {split}; "
+            f"{entry['bytes_on_disk'] / 1e6:.0f} MB on disk of {entry['bytes_raw'] / 1e6:.0f} MB"
+        )
+    for row in result.get("codecs", []):
+        lines.append(
+            f"  codec {row['codec']:<10} level {row['level']}: {row['seconds_per_sample']:.3f} "
+            f"s/sample ({row['mb_per_s']} MB/s), ratio {row['ratio']}"
+        )
+    return "\n".join(lines)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=8)
     parser.add_argument("--shard", type=int, default=4, help="samples per shard")
-    parser.add_argument(
-        "--codec", default="blosc-zstd", choices=["blosc-zstd", "blosc-lz4", "zstd", "none"]
-    )
+    parser.add_argument("--codec", default="blosc-zstd", choices=list(CODECS))
+    parser.add_argument("--level", type=int, default=1)
     parser.add_argument("--label-dtype", default="float32", choices=["float32", "float64"])
-    parser.add_argument("--workers", type=int, default=1)
+    parser.add_argument("--workers", type=int, nargs="+", default=[1])
+    parser.add_argument("--codecs", action="store_true", help="also compare codecs and levels")
+    parser.add_argument("--no-renderer", action="store_true", help="skip the renderer alone")
     parser.add_argument("--json", type=Path, help="also write the numbers here")
     args = parser.parse_args()
 
-    load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         config = load_config(
-            config_file(folder, args.samples, args.shard, args.codec, args.label_dtype)
+            config_file(folder, args.samples, args.shard, args.codec, args.level, args.label_dtype)
         )
-        # The renderer alone on the same samples (warm-up: the first kernel compilation).
-        randomiser = Randomiser(config, folder / "assets")
-        spec = randomiser.sample(0)
-        spec.scanner.capture(spec.scene, rng=spec.capture_seed).frames  # noqa: B018
-        start = time.perf_counter()
-        frames = 0
-        for index in range(args.samples):
-            spec = randomiser.sample(index)
-            frames += len(spec.scanner.capture(spec.scene, rng=spec.capture_seed).frames)
-        render_only_s = time.perf_counter() - start
-
-        store_path = folder / "store"
-        report = generate(config, store_path, workers=args.workers)
-        store = DatasetStore.open(store_path)
-        written = args.samples * len(spec.scanner.sequence)
-        compress_s = compression_seconds(store, args.codec, 1, args.samples)
-        disk = sum(p.stat().st_size for p in store_path.rglob("*") if p.is_file())
-        raw = args.samples * sum(a.nbytes for a in store.layout)
-
-    stages = dict(report.timing_s)
-    stages["compression"] = compress_s
-    stages["io_and_zarr"] = max(stages["write"] - compress_s, 0.0)
+        frames_per_sample = len(Randomiser(config, folder / "assets").sample(0).scanner.sequence)
+        renderer_load = load()
+        renderer = None if args.no_renderer else renderer_only(config, folder, args.samples)
+        runs = [run(config, folder, args.samples, w, frames_per_sample) for w in args.workers]
+        store = DatasetStore.open(folder / f"store_w{args.workers[0]}")
+        codecs = codec_table(store) if args.codecs else []
     result = {
         "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
         f"{platform.system()}",
-        "load_average_before": load_before,
         "image_px": "960x960",
-        "frames_per_sample": len(spec.scanner.sequence),
+        "frames_per_sample": frames_per_sample,
         "samples": args.samples,
-        "workers": args.workers,
+        "shard_samples": args.shard,
         "codec": args.codec,
+        "level": args.level,
         "label_dtype": args.label_dtype,
-        "images_per_s": written / report.seconds,
-        "samples_per_s": args.samples / report.seconds,
-        "seconds": report.seconds,
-        "stage_s": stages,
-        "stage_share": {k: v / report.seconds for k, v in stages.items() if k != "write"},
-        "renderer_only_images_per_s": frames / render_only_s,
-        "bytes_raw": raw,
-        "bytes_on_disk": disk,
+        "renderer_only_images_per_s": renderer and round(renderer, 1),
+        "renderer_load_average": renderer_load,
+        "runs": runs,
+        "codecs": codecs,
         "paper_images_per_s": 3.1,
         "target_images_per_s": 150.0,
     }
+    print(summary(result), file=sys.stderr)
     print(json.dumps(result, indent=2))
     if args.json:
         args.json.write_text(json.dumps(result, indent=2) + "\n")

@@ -187,7 +187,9 @@ def modulation(frames: np.ndarray, out: np.ndarray) -> np.ndarray:
     The ``modulation`` of :func:`virtus.phase.wrapped_phase`: with shifts
     ``d_n = 2 pi n / N``, ``B = (2 / N) hypot(sum I_n cos d_n, sum I_n sin d_n)`` (the sign
     and offset of a coding do not change it). Computed in ``out``'s precision, by blocks of
-    :data:`_BLOCK_ROWS` rows (small temporaries instead of an (N, H, W) real copy).
+    :data:`_BLOCK_ROWS` rows (small temporaries instead of an (N, H, W) real copy), with
+    ``einsum``'s own loops: a threaded BLAS product is slower on these short sums and
+    stalls when the cores are busy.
 
     Parameters
     ----------
@@ -199,7 +201,7 @@ def modulation(frames: np.ndarray, out: np.ndarray) -> np.ndarray:
     weights = np.stack([np.cos(shifts), np.sin(shifts)]).astype(out.dtype)
     for row in range(0, frames.shape[1], _BLOCK_ROWS):
         block = frames[:, row : row + _BLOCK_ROWS]
-        sums = weights @ block.reshape(steps, -1).astype(out.dtype)
+        sums = np.einsum("kn,nm->km", weights, block.reshape(steps, -1).astype(out.dtype))
         value = np.hypot(sums[0], sums[1], out=sums[0])
         value *= 2.0 / steps
         out[row : row + _BLOCK_ROWS] = value.reshape(block.shape[1:])
@@ -217,29 +219,34 @@ def _direction_labels(
     """Write the :data:`DIRECTION_LABELS` of one direction into ``out`` (name -> (H, W)
     view of the stored array, pre-filled with its fill value: NaN, order -1).
 
-    The absolute phase, its wrap and the fringe order are computed in float64 whatever the
-    stored dtype (phases reach ~10^3 rad: one rounding, at the store, keeps the labels
-    re-triangulating to the stored points); numerator, denominator and modulation are
-    computed in the stored dtype.
+    Computed by blocks of :data:`_BLOCK_ROWS` rows. The absolute phase, its wrap and the
+    fringe order are computed in float64 whatever the stored dtype (phases reach ~10^3 rad:
+    one rounding, at the store, keeps the labels re-triangulating to the stored points);
+    numerator, denominator and modulation are computed in the stored dtype.
     """
     axis = 0 if direction == "v" else 1
     period = sequence.periods(direction)[0]
+    scale = sequence.axis_scale(direction)
     indices, coding = _finest_phase_frames(sequence, direction)
-    with np.errstate(invalid="ignore"):  # NaN / inf where invalid: never stored
-        pattern = sequence.axis_scale(direction) * proj_uv[..., axis]  # pattern units
-        absolute = _phase.coordinate_to_phase(pattern, period)
-        wrapped = _phase.wrap(absolute)
-        order = absolute - wrapped
-        order /= _phase.TWO_PI
-        np.rint(order, out=order)
-    np.copyto(out["phase"], absolute, where=valid, casting="same_kind")
-    np.copyto(out["wrapped"], wrapped, where=valid, casting="same_kind")
-    np.copyto(out["order"], order, where=valid, casting="unsafe")  # integral where valid
-    mod = modulation(frames[indices], out["modulation"])
-    amplitude = (0.5 * coding.steps) * mod
-    angle = out["wrapped"]  # NaN outside valid: so are numerator and denominator
-    np.multiply(amplitude, np.sin(angle), out=out["numerator"])
-    np.multiply(amplitude, np.cos(angle), out=out["denominator"])
+    for row in range(0, valid.shape[0], _BLOCK_ROWS):
+        rows = slice(row, row + _BLOCK_ROWS)
+        mask = valid[rows]
+        dst = {name: array[rows] for name, array in out.items()}
+        with np.errstate(invalid="ignore"):  # NaN / inf where invalid: never stored
+            pattern = scale * proj_uv[rows, :, axis]  # pattern units
+            absolute = _phase.coordinate_to_phase(pattern, period)
+            wrapped = _phase.wrap(absolute)
+            order = absolute - wrapped
+            order /= _phase.TWO_PI
+            np.rint(order, out=order)
+        np.copyto(dst["phase"], absolute, where=mask, casting="same_kind")
+        np.copyto(dst["wrapped"], wrapped, where=mask, casting="same_kind")
+        np.copyto(dst["order"], order, where=mask, casting="unsafe")  # integral where valid
+        mod = modulation(frames[indices, rows], dst["modulation"])
+        amplitude = (0.5 * coding.steps) * mod
+        angle = dst["wrapped"]  # NaN outside valid: so are numerator and denominator
+        np.multiply(amplitude, np.sin(angle), out=dst["numerator"])
+        np.multiply(amplitude, np.cos(angle), out=dst["denominator"])
 
 
 def _surface_distance(record: ObjectRecord, local: np.ndarray) -> np.ndarray:
@@ -273,7 +280,8 @@ def object_ids(
     cam2world: Pose | None = None,
     out: np.ndarray | None = None,
 ) -> np.ndarray:
-    """(H, W) uint16 object id of each surface point (0: none).
+    """(H, W) uint16 object id of each surface point (0: none), by blocks of
+    :data:`_BLOCK_ROWS` rows.
 
     Parameters
     ----------
@@ -283,25 +291,30 @@ def object_ids(
     cam2world : camera pose in the world (None: ``points`` are world points).
     out : (H, W) uint16 to write (default: a new array).
     """
-    shape = points.shape[:2]
     if out is None:
-        out = np.empty(shape, dtype=np.uint16)
+        out = np.empty(points.shape[:2], dtype=np.uint16)
     out.fill(0)
-    hit = np.isfinite(points).all(axis=-1)
-    if not objects or not hit.any():
+    if not objects:
         return out
-    pts = points[hit]
-    distances = np.empty((len(objects), pts.shape[0]))
-    for k, record in enumerate(objects):
-        # one transform per object: camera (or world) frame -> object frame
-        to_local = record.pose.inverse() if cam2world is None else record.pose.inverse() @ cam2world
-        local = pts @ to_local.R.T
-        local += to_local.t
-        distances[k] = _surface_distance(record, local)
-    best = np.argmin(distances, axis=0)
-    close = distances[best, np.arange(pts.shape[0])] <= OBJECT_TOLERANCE_M
+    # one transform per object: camera (or world) frame -> object frame
+    to_local = [
+        o.pose.inverse() if cam2world is None else o.pose.inverse() @ cam2world for o in objects
+    ]
     ids = np.array([o.id for o in objects], dtype=np.uint16)
-    out[hit] = np.where(close, ids[best], 0)
+    for row in range(0, points.shape[0], _BLOCK_ROWS):
+        block = points[row : row + _BLOCK_ROWS]
+        hit = np.isfinite(block).all(axis=-1)
+        if not hit.any():
+            continue
+        pts = block[hit]
+        distances = np.empty((len(objects), pts.shape[0]))
+        for k, (record, pose) in enumerate(zip(objects, to_local, strict=True)):
+            local = pts @ pose.R.T
+            local += pose.t
+            distances[k] = _surface_distance(record, local)
+        best = np.argmin(distances, axis=0)
+        close = np.take_along_axis(distances, best[None], axis=0)[0] <= OBJECT_TOLERANCE_M
+        out[row : row + _BLOCK_ROWS][hit] = np.where(close, ids[best], 0)
     return out
 
 
@@ -347,16 +360,11 @@ def sample_arrays(
         np.copyto(out[name], getattr(gt, name), casting="same_kind")
     for name in DIRECTION_LABELS:
         out[name].fill(specs[name].fill)
-    # Row blocks: every temporary stays small (cache-resident, no fresh memory per sample).
-    for row in range(0, valid.shape[0], _BLOCK_ROWS):
-        rows = slice(row, row + _BLOCK_ROWS)
-        for direction in sequence.directions:
-            channel = DIRECTIONS.index(direction)
-            views = {name: out[name][channel, rows] for name in DIRECTION_LABELS}
-            _direction_labels(
-                sequence, frames[:, rows], gt.proj_uv[rows], valid[rows], direction, views
-            )
-        object_ids(spec.objects, gt.points[rows], spec.cam2world, out=out["object_id"][rows])
+    for direction in sequence.directions:
+        channel = DIRECTIONS.index(direction)
+        views = {name: out[name][channel] for name in DIRECTION_LABELS}
+        _direction_labels(sequence, frames, gt.proj_uv, valid, direction, views)
+    object_ids(spec.objects, gt.points, spec.cam2world, out=out["object_id"])
     return out
 
 
