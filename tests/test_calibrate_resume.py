@@ -24,7 +24,7 @@ import pytest
 from tests import tolerances as tol
 from virtus.calib.poses import BoardPose
 from virtus.devices import Camera, Projector, Rig, default_rig
-from virtus.errors import VirtusError
+from virtus.errors import InputError, VirtusError
 from virtus.pipeline.calibrate import calibrate_rig, recalibrate
 from virtus.scanner import Scanner
 from virtus.transforms import Pose
@@ -267,3 +267,14 @@ def test_fronto_parallel_poses_are_refused_not_solved(tmp_path):
         " pose 'tilted_y' left out",
     ]
     assert (tmp_path / "calibration.json").read_bytes() == written  # nothing replaced
+
+
+def test_observing_in_worker_processes_gives_the_same_files(tmp_path):
+    scanner = Scanner(rig=quarter_rig(), spp=1)
+    options = {"board": "4x7", "poses": f"random:{N_POSES}", "rng": 5}
+    here = calibrate_rig(scanner, out_dir=tmp_path / "here", processes=0, **options)
+    workers = calibrate_rig(scanner, out_dir=tmp_path / "workers", processes=2, **options)
+    assert _contents(tmp_path / "workers") == _contents(tmp_path / "here")
+    assert workers.rms_px == here.rms_px
+    with pytest.raises(InputError, match="processes"):
+        calibrate_rig(scanner, processes=99, **options)

@@ -156,3 +156,21 @@ def test_16_bit_frames_come_back_whole_and_in_order(shape) -> None:
     host = frames.numpy()
     assert host.dtype == np.uint16
     np.testing.assert_array_equal(host, values.reshape(shape))
+
+
+def test_a_pose_decoded_on_the_device_is_the_capture_decoded_on_the_host() -> None:
+    from virtus.scanner import Scanner
+
+    scanner = Scanner(rig=small_rig(), sensor=SENSOR_PRESETS["imx174"], variant=VARIANT)
+    scene = default_scene()
+    host = scanner.decoded_view(scene, rng=4, on_device=False)
+    device = scanner.decoded_view(scene, rng=4, on_device=True)
+    off = np.abs(device.white.astype(np.int64) - host.white.astype(np.int64))
+    assert off.max() <= 1 and np.count_nonzero(off) <= MAX_OFF_BY_ONE_FRACTION * off.size
+    # Frames agree to 1 DN at rounding edges (above), so decodes agree closely, not bitwise.
+    both = host.decoded.mask & device.decoded.mask
+    assert np.count_nonzero(host.decoded.mask ^ device.decoded.mask) <= 1e-3 * both.size
+    difference = device.decoded.proj_uv[both] - host.decoded.proj_uv[both]
+    assert np.sqrt(np.mean(difference**2)) < 1e-3  # px
+    orders = np.abs(difference) > 0.5
+    assert not orders.any()

@@ -19,7 +19,7 @@ from virtus.checks import positive_int
 from virtus.devices import Rig, default_rig
 from virtus.errors import InputError
 from virtus.optics import ThinLens
-from virtus.patterns import PatternSequence, default_sequence
+from virtus.patterns import DecodeResult, PatternSequence, default_sequence
 from virtus.projection import Lookup, ProjectorModel
 from virtus.sensor import Sensor, as_seed
 from virtus.transforms import Pose
@@ -29,6 +29,21 @@ from virtus.transforms import Pose
 MAX_SPP = 1024
 #: Largest number of camera rays per pose (pixels x spp): ~100 bytes each in the trace.
 MAX_RAYS = 1 << 27
+
+
+@dataclass(frozen=True, eq=False)
+class DecodedView:
+    """One pose decoded where it was rendered, without ground truth or a capture: what a
+    calibration observes (:meth:`Scanner.decoded_view`).
+
+    Attributes
+    ----------
+    decoded : the decode (as :meth:`virtus.capture.Capture.decode` gives it).
+    white : (H, W) the sequence's first white frame (digital numbers), or None without one.
+    """
+
+    decoded: DecodeResult
+    white: np.ndarray | None
 
 
 @dataclass(frozen=True)
@@ -126,6 +141,52 @@ class Scanner:
             "camera_lens": None if self.camera_lens is None else self.camera_lens.to_dict(),
             "aperture_samples": self.aperture_samples,
         }
+
+    def decoded_view(
+        self,
+        scene: Any,
+        *,
+        cam2world: Pose | None = None,
+        rng: np.random.Generator | int | None = None,
+        on_device: bool | None = None,
+    ) -> DecodedView:
+        """Render one pose and decode it, as ``capture(...).decode()`` does, without the
+        ground truth.
+
+        With ``on_device`` (default: on CUDA variants) the frames never leave the device
+        that rendered them: they are decoded there (:mod:`virtus.render.decode_jit`) and
+        only the decode and the white frame are copied. Otherwise this is exactly
+        ``capture(...).decode()``.
+        """
+        from virtus.render.backend import choose_variant
+
+        kinds = [frame.kind for frame in self.sequence.frames]  # type: ignore[union-attr]
+        white = kinds.index("white") if "white" in kinds else None
+        if on_device is None:
+            on_device = choose_variant(self.variant).startswith("cuda")
+        if not on_device:
+            capture = self.capture(scene, cam2world=cam2world, rng=rng, command=[])
+            frame = None if white is None else capture.frames[white]
+            return DecodedView(capture.decode(), frame)
+        from virtus.render.decode_jit import decode_on_device
+        from virtus.render.pipeline import render_device
+
+        rendering = render_device(
+            self.rig, scene, self.sequence, projector=self.projector, sensor=self.sensor,
+            seed=as_seed(rng), spp=self.spp, cam2world=cam2world, variant=self.variant,
+            bounces=self.bounces, projector_lens=self.projector_lens,
+            camera_lens=self.camera_lens, aperture_samples=self.aperture_samples,
+        )  # fmt: skip
+        frames = rendering.frames
+        decoded = decode_on_device(
+            frames.data,
+            self.sequence,
+            frames.height,
+            frames.width,  # type: ignore[arg-type]
+            full_scale=self.sensor.full_scale,
+        ).to_host(self.sequence, neighbour_check=None)  # type: ignore[arg-type]
+        frame = None if white is None else frames.frame(white)
+        return DecodedView(decoded, frame)
 
     def capture(
         self,

@@ -62,7 +62,6 @@ import re
 import time
 import warnings
 from collections.abc import Callable, Iterator
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -248,32 +247,72 @@ def observe_pose(capture: Capture, board: Board, name: str) -> PoseObservation:
     white frame). Projector coordinates come from :meth:`Capture.decode`.
     """
     check_sequence(capture.sequence)
-    decoded = capture.decode()
-    uniform = decoded.background
     kinds = [frame.kind for frame in capture.sequence.frames]
-    detect_on = capture.frames[kinds.index("white")] if "white" in kinds else uniform
-    centres = find_grid(detect_on, board)
+    white = capture.frames[kinds.index("white")] if "white" in kinds else None
+    decoded = capture.decode()
+    return observe_arrays(decoded.proj_uv, decoded.background, white, board, name)
+
+
+def observe_arrays(
+    proj_uv: np.ndarray, background: np.ndarray, white: np.ndarray | None, board: Board, name: str
+) -> PoseObservation:
+    """:func:`observe_pose` from what it reads of a pose: the decoded projector coordinates
+    (H, W, 2) px, the phase background (H, W) and the white frame (H, W), or None to detect
+    on the background."""
+    centres = find_grid(background if white is None else white, board)
     if centres is None:
         return PoseObservation(name, None, None)
-    centroids = refine_points(uniform, board, centres)
-    homographies = local_homographies(decoded.proj_uv, board, centres)
-    return PoseObservation(name, centroids, homographies)
+    centroids = refine_points(background, board, centres)
+    return PoseObservation(name, centroids, local_homographies(proj_uv, board, centres))
 
 
-#: Most threads observing poses while others render (each holds one pose's capture).
-MAX_OBSERVE_WORKERS = 8
+#: Most processes observing poses while the renderer makes the next ones.
+MAX_OBSERVE_PROCESSES = 8
+#: Fewer CPUs than this: observe in the rendering process (worker start-up and moving a
+#: pose's decode between processes would cost more than they save).
+MIN_CPUS_FOR_PROCESSES = 4
 
 
-def observe_workers() -> int:
-    """Threads that observe poses: one per CPU beyond the one rendering, 1 to
-    :data:`MAX_OBSERVE_WORKERS`."""
-    return max(1, min(MAX_OBSERVE_WORKERS, (os.cpu_count() or 1) - 1))
+def observe_processes() -> int:
+    """Worker processes that observe poses (0: observe in this process): one per CPU
+    beyond the renderer's, at most :data:`MAX_OBSERVE_PROCESSES`."""
+    cpus = os.cpu_count() or 1
+    return 0 if cpus < MIN_CPUS_FOR_PROCESSES else min(MAX_OBSERVE_PROCESSES, cpus - 1)
 
 
-def _observe_timed(capture: Capture, board: Board, name: str) -> tuple[PoseObservation, float]:
-    """:func:`observe_pose` and the seconds it took (in its worker thread)."""
+def _observe_timed(*arguments: Any) -> tuple[PoseObservation, float]:
+    """:func:`observe_arrays` and the seconds it took (in a worker process or here)."""
     start = time.perf_counter()
-    return observe_pose(capture, board, name), time.perf_counter() - start
+    return observe_arrays(*arguments), time.perf_counter() - start
+
+
+class _InProcess:
+    """The ``submit``/``result`` of an executor, run at once in this process."""
+
+    class _Done:
+        def __init__(self, value: Any) -> None:
+            self.value = value
+
+        def result(self) -> Any:
+            return self.value
+
+    def submit(self, function: Callable, *arguments: Any) -> _Done:
+        return self._Done(function(*arguments))
+
+
+@contextlib.contextmanager
+def _observer_pool(processes: int) -> Iterator[Any]:
+    """Worker processes for :func:`_observe_timed` (spawned: the renderer's threads and
+    device context are not forked), or this process when ``processes`` is 0."""
+    if processes == 0:
+        yield _InProcess()
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(processes, mp_context=context) as pool:
+        yield pool
 
 
 def pose_seed(seed: int, index: int) -> int:
@@ -480,6 +519,7 @@ def calibrate_rig(
     overwrite: bool = False,
     fix_intrinsics: bool = False,
     check_poses: bool = True,
+    processes: int | None = None,
 ) -> CalibrationResult:
     """Capture a board in every pose with ``scanner`` and calibrate its rig back.
 
@@ -503,6 +543,8 @@ def calibrate_rig(
     check_poses : check a given pose list against both fields first (raise on the first
         pose outside); ``False`` captures them anyway (poses whose board is not fully seen
         are then dropped with a warning).
+    processes : worker processes that observe poses while the next render (0: in this
+        process; default :func:`observe_processes`); the result does not depend on it.
 
     Returns
     -------
@@ -519,6 +561,12 @@ def calibrate_rig(
         raise InputError("scanner", "a virtus.scanner.Scanner", type(scanner).__name__)
     if out_dir is None and (resume or overwrite):
         raise InputError("out_dir", "a directory for resume/overwrite", None)
+    if processes is not None and (
+        isinstance(processes, bool)
+        or not isinstance(processes, int)
+        or not 0 <= processes <= MAX_OBSERVE_PROCESSES
+    ):
+        raise InputError("processes", f"an integer in 0..{MAX_OBSERVE_PROCESSES}", processes)
     check_sequence(scanner.sequence)
     if isinstance(poses, str):
         poses = check_pose_spec(poses)  # "Random:6 " and "random:6" are one configuration
@@ -528,7 +576,7 @@ def calibrate_rig(
     check_pose_spread(pose_list)
     episode = _episode(scanner, board, pose_list, poses, seed, bool(fix_intrinsics))
     if out_dir is None:
-        return _run_episode(scanner, board, pose_list, episode, progress, None)
+        return _run_episode(scanner, board, pose_list, episode, progress, None, processes)
     config = {
         "scanner": episode["scanner"],
         "board": episode["board"],
@@ -540,7 +588,7 @@ def calibrate_rig(
     with claim_run(
         out_dir, COMMAND, config, layout=LAYOUT, overwrite=overwrite, resume=resume
     ) as run:
-        return _run_episode(scanner, board, pose_list, episode, progress, run)
+        return _run_episode(scanner, board, pose_list, episode, progress, run, processes)
 
 
 def _run_episode(
@@ -550,6 +598,7 @@ def _run_episode(
     episode: dict[str, Any],
     progress: Progress | None,
     run: RunDirectory | None,
+    processes: int | None = None,
 ) -> CalibrationResult:
     blur = CHECKER_BLUR_M if isinstance(board, CheckerBoard) else BOARD_BLUR_M
     texture = board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=blur)
@@ -561,15 +610,15 @@ def _run_episode(
         # Same bytes as the first run's when resuming (the configuration is the same).
         run.write_json(EPISODE_FILE, episode)
     observations: list[PoseObservation] = []
-    # Poses are rendered here, one after the other (the renderer uses the whole device),
-    # and observed in worker threads (detection and decoding run in OpenCV and numpy,
-    # which release the GIL) while the next poses render. Results are taken in pose order,
-    # so the files, the log and the result are those of a sequential run.
+    # Poses are rendered and decoded here, one after the other (the renderer uses the whole
+    # device), and observed (detection, centroids, local homographies: CPU work) in worker
+    # processes while the next poses render. Results are taken in pose order, so files,
+    # log and result are those of a sequential run.
     pending: collections.deque = collections.deque()
 
     def finish_oldest() -> None:
-        index, pose, seed, future = pending.popleft()
-        obs, seconds = future.result()
+        index, pose, seed, job = pending.popleft()
+        obs, seconds = job.result()
         timing["observe_s"] += seconds
         observations.append(obs)
         if run is not None:
@@ -581,8 +630,8 @@ def _run_episode(
         if progress is not None:
             progress(index + 1, len(pose_list), pose.name)
 
-    workers = observe_workers()
-    with ThreadPoolExecutor(workers, thread_name_prefix="observe") as pool:
+    workers = observe_processes() if processes is None else processes
+    with _observer_pool(workers) as pool:
         for index, pose in enumerate(pose_list):
             seed = episode["pose_seeds"][index]
             name = f"{POSE_DIR}/{pose.name}.npz"
@@ -595,12 +644,11 @@ def _run_episode(
                     progress(index + 1, len(pose_list), pose.name)
                 continue
             start = time.perf_counter()
-            capture = scanner.capture(board_scene(board, pose, texture), rng=seed)
+            view = scanner.decoded_view(board_scene(board, pose, texture), rng=seed)
             timing["render_s"] += time.perf_counter() - start
-            pending.append(
-                (index, pose, seed, pool.submit(_observe_timed, capture, board, pose.name))
-            )
-            while len(pending) > workers:  # bounds the captures held in memory
+            arguments = (view.decoded.proj_uv, view.decoded.background, view.white, board)
+            pending.append((index, pose, seed, pool.submit(_observe_timed, *arguments, pose.name)))
+            while len(pending) > max(workers, 0):  # bounds the poses held in memory
                 finish_oldest()
         while pending:
             finish_oldest()

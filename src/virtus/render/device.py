@@ -188,6 +188,15 @@ class DeviceFrames:
         packed = np.asarray((low | (high << 16)).numpy(), dtype="<u4")
         return packed.view("<u2")[:size].astype(self.dtype, copy=False).reshape(shape)
 
+    def frame(self, index: int) -> np.ndarray:
+        """(H, W) frame ``index`` on the host (one frame's transfer)."""
+        mi, dr = _modules_of(self.data)
+        n_pixels = self.height * self.width
+        values = dr.gather(
+            type(self.data), self.data, dr.arange(mi.UInt32, n_pixels) + index * n_pixels
+        )
+        return np.asarray(values.numpy()).astype(self.dtype).reshape(self.height, self.width)
+
     def saturated_mask(self) -> np.ndarray:
         """(H, W) bool saturation mask on the host."""
         return np.asarray(self.saturated.numpy(), dtype=bool).reshape(self.height, self.width)
