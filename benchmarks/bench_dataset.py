@@ -44,7 +44,7 @@ from virtus.data.config import CODECS
 from virtus.data.generate import TIMING_KEYS
 from virtus.data.sampling import Randomiser
 from virtus.data.shards import ShardEncoder
-from virtus.data.store import _codec
+from virtus.data.store import zarr_compressor
 
 
 def config_file(folder: Path, samples: int, shard: int, codec: str, level: int, dtype: str) -> Path:
@@ -109,7 +109,7 @@ def codec_table(store: DatasetStore) -> list[dict]:
                     array = group.create_array(
                         f"{codec}_{level}_{spec.name}", shape=(1, *spec.shape),
                         chunks=(1, *spec.shape), shards=(1, *spec.shape), dtype=spec.dtype,
-                        fill_value=spec.fill, compressors=_codec(codec, level),
+                        fill_value=spec.fill, compressors=zarr_compressor(codec, level, spec.name),
                     )  # fmt: skip
                     encoder = ShardEncoder.for_array(array, Path(tmp) / array.name)
                     start = time.perf_counter()
@@ -154,10 +154,13 @@ def run(config, folder: Path, samples: int, workers: int, frames_per_sample: int
 def summary(result: dict) -> str:
     lines = [
         f"{result['machine']}; {result['image_px']} px, {result['frames_per_sample']} frames a "
-        f"sample, {result['samples']} samples, codec {result['codec']} level {result['level']}",
-        f"renderer alone: {result['renderer_only_images_per_s']:.1f} images/s "
-        f"(load {result['renderer_load_average']})",
+        f"sample, {result['samples']} samples, codec {result['codec']} level {result['level']}"
     ]
+    if result["renderer_only_images_per_s"] is not None:
+        lines.append(
+            f"renderer alone: {result['renderer_only_images_per_s']:.1f} images/s "
+            f"(load {result['renderer_load_average']})"
+        )
     for entry in result["runs"]:
         stages = entry["stage_s"]
         split = ", ".join(f"{k} {stages[k]:.2f}" for k in TIMING_KEYS if k != "write")
@@ -179,7 +182,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=8)
     parser.add_argument("--shard", type=int, default=4, help="samples per shard")
-    parser.add_argument("--codec", default="blosc-zstd", choices=list(CODECS))
+    parser.add_argument("--codec", default="blosc-auto", choices=list(CODECS))
     parser.add_argument("--level", type=int, default=1)
     parser.add_argument("--label-dtype", default="float32", choices=["float32", "float64"])
     parser.add_argument("--workers", type=int, nargs="+", default=[1])

@@ -290,7 +290,7 @@ def test_shards_written_directly_are_the_bytes_zarr_writes(tmp_path, codec) -> N
     import zarr
 
     from virtus.data.shards import ShardEncoder
-    from virtus.data.store import _codec
+    from virtus.data.store import zarr_compressor
 
     rng = np.random.default_rng(5)
     group = zarr.open_group(tmp_path, mode="w")
@@ -309,7 +309,7 @@ def test_shards_written_directly_are_the_bytes_zarr_writes(tmp_path, codec) -> N
                 shards=(3, *shape[1:]),
                 dtype=dtype,
                 fill_value=fill,
-                compressors=_codec(codec, 3),
+                compressors=zarr_compressor(codec, 3, "frames"),
             )  # fmt: skip
             for name in ("zarr", "direct")
         ]

@@ -15,9 +15,9 @@
    (:func:`~virtus.data.labels.sample_arrays`) into a shard buffer, write the shard and
    then its record. A task depends only on the store path and the shard number, so it is
    idempotent: a retried or repeated task writes the same bytes. Tasks run in this process
-   (``workers=1``: each shard is written on a background thread while the next one is
-   rendered), in ``workers`` spawned processes (each owns the shards it is given), or as
-   Ray tasks.
+   (``workers=1``: rendering, labelling and writing run side by side on three threads,
+   :func:`_run_pipelined`), in ``workers`` spawned processes (each owns the shards it is
+   given), or as Ray tasks.
 
 Rerunning the same command after an interruption (even ``kill -9``) renders only the
 shards without a record; the store ends byte for byte as an uninterrupted run leaves it.
@@ -61,8 +61,12 @@ Progress = Callable[[int, int, int], None]
 #: ``labels`` (:func:`~virtus.data.labels.sample_arrays`), ``checksum`` and ``compression``
 #: (work, summed over the threads doing it), ``io`` (shard files and records), ``write``
 #: (the whole :meth:`~virtus.data.store.DatasetStore.write_shard`: checksum, compression
-#: and io side by side), ``write_wait`` (rendering held up by a shard still being written).
+#: and io side by side), ``write_wait`` (rendering held up by the labelling and writing
+#: behind it in a pipelined run).
 TIMING_KEYS = ("render", "labels", "checksum", "compression", "io", "write", "write_wait")
+#: Rendered samples that may wait for their labels in a pipelined run (each holds its
+#: frames and float64 ground truth: ~110 MB at 960 x 960 with 52 frames).
+_LABEL_QUEUE = 2
 #: In a worker process: the shard buffer kept between tasks (see :func:`_shard_buffer`).
 _IN_WORKER = False
 _WORKER_BUFFER: tuple[tuple[str, str], dict[str, np.ndarray]] | None = None
@@ -157,6 +161,31 @@ def _randomiser(path: str, digest: str) -> Randomiser:
     return Randomiser(config, Path(path) / ASSETS_DIR)
 
 
+def _render(randomiser: Randomiser, index: int, threads: int | None) -> tuple[Any, Any, float]:
+    """Sample ``index``'s specification and capture (frames materialised), and the seconds."""
+    begin = time.perf_counter()
+    spec = randomiser.sample(index)
+    capture = spec.scanner.capture(
+        spec.scene, cam2world=spec.cam2world, rng=spec.capture_seed, command=[], threads=threads
+    )
+    capture.frames  # noqa: B018 - rendered frames are materialised here (timing)
+    return spec, capture, time.perf_counter() - begin
+
+
+def _label(
+    store: DatasetStore, spec: Any, capture: Any, buffer: dict[str, np.ndarray], slot: int
+) -> float:
+    """Write a sample's arrays into slot ``slot`` of a shard buffer; returns the seconds."""
+    begin = time.perf_counter()
+    sample_arrays(capture, spec, store.layout, {name: b[slot] for name, b in buffer.items()})
+    return time.perf_counter() - begin
+
+
+def _synthesis_threads(randomiser: Randomiser) -> int | None:
+    cam = randomiser.rig.camera.intrinsics
+    return 1 if cam.width * cam.height <= _SMALL_IMAGE_PIXELS else None
+
+
 def _fill_shard(
     store: DatasetStore,
     randomiser: Randomiser,
@@ -169,25 +198,14 @@ def _fill_shard(
     slot ``k`` = the shard's ``k``-th sample). Returns their metadata and the seconds spent
     (``render``, ``labels``)."""
     start, stop = store.shard_bounds(shard, num_samples)
-    cam = randomiser.rig.camera.intrinsics
-    threads = 1 if cam.width * cam.height <= _SMALL_IMAGE_PIXELS else None
+    threads = _synthesis_threads(randomiser)
     timing = {"render": 0.0, "labels": 0.0}
     metas = []
     for slot, index in enumerate(range(start, stop)):
-        t0 = time.perf_counter()
-        spec = randomiser.sample(index)
-        capture = spec.scanner.capture(
-            spec.scene, cam2world=spec.cam2world, rng=spec.capture_seed, command=[],
-            threads=threads,
-        )  # fmt: skip
-        capture.frames  # noqa: B018 - rendered frames are materialised here (timing)
-        t1 = time.perf_counter()
-        out = {name: block[slot] for name, block in buffer.items()}
-        sample_arrays(capture, spec, store.layout, out)
+        spec, capture, seconds = _render(randomiser, index, threads)
+        timing["render"] += seconds
+        timing["labels"] += _label(store, spec, capture, buffer, slot)
         metas.append(sample_meta(spec, capture))
-        t2 = time.perf_counter()
-        timing["render"] += t1 - t0
-        timing["labels"] += t2 - t1
         if on_sample is not None:
             on_sample()
     return metas, timing
@@ -261,39 +279,82 @@ def _result(
     return {"shard": shard, "samples": len(metas), "timing_s": stages}
 
 
+def _write_labelled(
+    store: DatasetStore,
+    shard: int,
+    buffer: dict[str, np.ndarray],
+    metas: list[dict[str, Any]],
+    labelled: list[Any],
+) -> tuple[dict[str, float], float]:
+    """Write a shard once all its samples are labelled (a failed labelling fails the write:
+    nothing is written). Returns the write's timing and the labelling seconds."""
+    labels = sum(future.result() for future in labelled)
+    return store.write_shard(shard, buffer, metas), labels
+
+
 def _run_pipelined(
     path: Path, shards: list[int], num: int, digest: str, tick: Callable
 ) -> Iterator[dict[str, Any]]:
-    """Shards in this process, each written on a background thread while the next one is
-    rendered into a second buffer (checksums, compression and file writes release the
-    GIL). At most one write is in flight, so a shard's record still follows its data and
-    an interrupted run leaves what the sequential order would."""
+    """Shards in this process as a three-stage pipeline: this thread renders, a second
+    labels each rendered sample into a shard buffer, a third writes each labelled shard
+    (its checksums and compression on a few more threads), so a shard is labelled and
+    written while the next is rendered. The label and write work is numpy, SHA-256, the
+    compressors and file I/O, which release the GIL.
+
+    Two shard buffers alternate: a shard's buffer is reused only after the write of the
+    shard two before it has finished. At most :data:`_LABEL_QUEUE` rendered samples wait
+    for their labels (bounded memory). Shards are written in order by one thread, each
+    record after its data, so an interrupted run leaves what the sequential order would.
+    """
+    from collections import deque
     from concurrent.futures import ThreadPoolExecutor
 
     store, randomiser = _open(path, digest)
+    threads = _synthesis_threads(randomiser)
     buffers: list[dict[str, np.ndarray]] = []
-    pending = None
+    writes: deque[tuple[Any, int, list[dict[str, Any]], dict[str, float]]] = deque()
+    queue: deque[Any] = deque()  # label futures not yet known to be done
+    waited = 0.0
 
-    def finish(job: tuple[Any, ...]) -> dict[str, Any]:
-        future, shard, metas, timing = job
+    def finish() -> dict[str, Any]:
+        nonlocal waited
+        future, shard, metas, timing = writes.popleft()
         begin = time.perf_counter()
-        write = future.result()
-        return _result(shard, metas, timing, write, time.perf_counter() - begin)
+        write, labels = future.result()
+        wait, waited = waited + time.perf_counter() - begin, 0.0
+        return _result(shard, metas, {**timing, "labels": labels}, write, wait)
 
-    with ThreadPoolExecutor(1, thread_name_prefix="virtus-shard-writer") as writer:
+    with (
+        ThreadPoolExecutor(1, thread_name_prefix="virtus-labels") as labeller,
+        ThreadPoolExecutor(1, thread_name_prefix="virtus-shard-writer") as writer,
+    ):
         for number, shard in enumerate(shards):
             if len(buffers) < 2:
                 buffers.append(store.shard_buffer(store.shard_samples))
-            # this buffer's previous write was awaited before the last submission
             buffer = buffers[number % 2]
-            metas, timing = _fill_shard(
-                store, randomiser, shard, num, buffer, on_sample=lambda: tick(1)
-            )
-            if pending is not None:
-                yield finish(pending)
-            pending = (writer.submit(store.write_shard, shard, buffer, metas), shard, metas, timing)
-        if pending is not None:
-            yield finish(pending)
+            while len(writes) >= 2:  # the shard that last used this buffer is written first
+                yield finish()
+            start, stop = store.shard_bounds(shard, num)
+            timing = {"render": 0.0}
+            metas, labelled = [], []
+            for slot, index in enumerate(range(start, stop)):
+                spec, capture, seconds = _render(randomiser, index, threads)
+                timing["render"] += seconds
+                metas.append(sample_meta(spec, capture))
+                labelled.append(labeller.submit(_label, store, spec, capture, buffer, slot))
+                queue.append(labelled[-1])
+                del spec, capture  # held by the label task only
+                tick(1)
+                begin = time.perf_counter()
+                while len(queue) > _LABEL_QUEUE:
+                    queue.popleft().result()
+                waited += time.perf_counter() - begin
+                while writes and writes[0][0].done():
+                    yield finish()
+            job = writer.submit(_write_labelled, store, shard, buffer, metas, labelled)
+            writes.append((job, shard, metas, timing))
+        while writes:
+            yield finish()
 
 
 def _worker_init() -> None:
