@@ -249,29 +249,56 @@ def _direction_labels(
         np.multiply(amplitude, np.cos(angle), out=dst["denominator"])
 
 
+def _norm(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """(M,) Euclidean norm of vectors given by their components (M,) each."""
+    total = x * x
+    total += y * y
+    total += z * z
+    return np.sqrt(total, out=total)
+
+
 def _surface_distance(record: ObjectRecord, local: np.ndarray) -> np.ndarray:
-    """(M,) distance (m) from points (M, 3) in the object's frame to its surface (inf: not
-    it)."""
+    """(M,) distance (m) from points in the object's frame, (3, M) component-major, to its
+    surface (inf: not it)."""
+    x, y, z = local
     if record.type == "sphere":
-        return np.abs(np.sqrt(np.einsum("ij,ij->i", local, local)) - record.size_m[0])
+        distance = _norm(x, y, z)
+        distance -= record.size_m[0]
+        return np.abs(distance, out=distance)
     if record.type in ("plane", "board"):
         half = 0.5 * np.asarray(record.size_m) + OBJECT_TOLERANCE_M
-        inside = (np.abs(local[:, 0]) <= half[0]) & (np.abs(local[:, 1]) <= half[1])
-        return np.where(inside, np.abs(local[:, 2]), np.inf)
+        inside = (np.abs(x) <= half[0]) & (np.abs(y) <= half[1])
+        return np.where(inside, np.abs(z), np.inf)
     if record.type == "box":
         excess = np.abs(local)
-        excess -= 0.5 * np.asarray(record.size_m)
-        largest = np.minimum(excess.max(axis=1), 0.0)
+        excess -= 0.5 * np.asarray(record.size_m)[:, None]
+        largest = np.minimum(np.maximum(np.maximum(excess[0], excess[1]), excess[2]), 0.0)
         np.maximum(excess, 0.0, out=excess)
-        outside = np.sqrt(np.einsum("ij,ij->i", excess, excess))
-        return np.abs(outside + largest)
+        distance = _norm(*excess)
+        distance += largest
+        return np.abs(distance, out=distance)
     low, high = np.asarray(record.size_m[:3]), np.asarray(record.size_m[3:])
     margin = OBJECT_TOLERANCE_M
-    inside = np.all((local >= low - margin) & (local <= high + margin), axis=1)
+    inside = np.ones(x.shape, dtype=bool)
+    for axis in range(3):
+        inside &= (local[axis] >= low[axis] - margin) & (local[axis] <= high[axis] + margin)
     # Overlapping boxes: the nearer box centre wins (by a hair, within the sentinel).
-    offset = local - 0.5 * (low + high)
-    nearness = np.sqrt(np.einsum("ij,ij->i", offset, offset)) * 1e-6
+    centre = 0.5 * (low + high)
+    nearness = _norm(x - centre[0], y - centre[1], z - centre[2]) * 1e-6
     return np.where(inside, _MESH_BOX_DISTANCE_M + nearness, np.inf)
+
+
+def _transform(points: np.ndarray, pose: Pose) -> np.ndarray:
+    """(3, M) component-major ``R @ p + t`` of points (M, 3), by columns: a threaded BLAS
+    product is slower on these three-wide rows and stalls when the cores are busy."""
+    out = np.empty((3, points.shape[0]))
+    for row in range(3):
+        value = out[row]
+        np.multiply(points[:, 0], pose.R[row, 0], out=value)
+        value += points[:, 1] * pose.R[row, 1]
+        value += points[:, 2] * pose.R[row, 2]
+        value += pose.t[row]
+    return out
 
 
 def object_ids(
@@ -303,18 +330,26 @@ def object_ids(
     ids = np.array([o.id for o in objects], dtype=np.uint16)
     for row in range(0, points.shape[0], _BLOCK_ROWS):
         block = points[row : row + _BLOCK_ROWS]
-        hit = np.isfinite(block).all(axis=-1)
-        if not hit.any():
+        hit = np.isfinite(block[..., 0]) & np.isfinite(block[..., 1]) & np.isfinite(block[..., 2])
+        every = bool(hit.all())
+        if not every and not hit.any():
             continue
-        pts = block[hit]
-        distances = np.empty((len(objects), pts.shape[0]))
+        pts = block.reshape(-1, 3) if every else block[hit]
+        # the nearest surface; on a tie the first object (as argmin)
+        nearest, which = None, np.zeros(pts.shape[0], dtype=np.intp)
         for k, (record, pose) in enumerate(zip(objects, to_local, strict=True)):
-            local = pts @ pose.R.T
-            local += pose.t
-            distances[k] = _surface_distance(record, local)
-        best = np.argmin(distances, axis=0)
-        close = np.take_along_axis(distances, best[None], axis=0)[0] <= OBJECT_TOLERANCE_M
-        out[row : row + _BLOCK_ROWS][hit] = np.where(close, ids[best], 0)
+            distance = _surface_distance(record, _transform(pts, pose))
+            if nearest is None:
+                nearest = distance
+                continue
+            closer = distance < nearest
+            which[closer] = k
+            np.minimum(nearest, distance, out=nearest)
+        labels = np.where(nearest <= OBJECT_TOLERANCE_M, ids[which], 0)  # type: ignore[operator]
+        if every:
+            out[row : row + _BLOCK_ROWS] = labels.reshape(hit.shape)
+        else:
+            out[row : row + _BLOCK_ROWS][hit] = labels
     return out
 
 
