@@ -174,3 +174,15 @@ def test_a_pose_decoded_on_the_device_is_the_capture_decoded_on_the_host() -> No
     assert np.sqrt(np.mean(difference**2)) < 1e-3  # px
     orders = np.abs(difference) > 0.5
     assert not orders.any()
+
+
+def test_a_texture_is_reused_only_while_its_image_is_unchanged() -> None:
+    from virtus.render.mitsuba_scene import _texture
+
+    mi, _, _ = mitsuba(VARIANT)
+    image = np.full((8, 8), 0.5)
+    first = _texture(mi, image)
+    assert _texture(mi, image) is first
+    assert _texture(mi, image.copy()) is not first  # another array: its own texture
+    image[2, 3] = 0.25  # the same array, changed in place
+    assert _texture(mi, image) is not first

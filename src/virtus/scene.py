@@ -232,15 +232,22 @@ def _as_vector(name: str, value: Any, length: int, *, positive_entries: bool) ->
 
 
 def _as_unit_image(name: str, value: Any) -> np.ndarray:
-    """A (H, W) float64 array in [0, 1], read-only."""
-    array = np.array(value, dtype=np.float64)
+    """A (H, W) float64 array in [0, 1], read-only: a copy, unless ``value`` already is a
+    read-only float64 array owning its data (nothing can change it then), so scenes built
+    from one image share it (and the renderer's texture made from it)."""
+    reusable = (
+        isinstance(value, np.ndarray) and value.dtype == np.float64
+        and not value.flags.writeable and value.flags.owndata
+    )  # fmt: skip
+    array = value if reusable else np.array(value, dtype=np.float64)
     if array.ndim != 2 or min(array.shape) < 1:
         raise InputError(name, "a (H, W) array", f"shape {array.shape}")
     if not np.all(np.isfinite(array)) or array.min() < 0 or array.max() > 1:
         raise InputError(
             name, "values in [0, 1]", f"range [{np.nanmin(array):.4g}, {np.nanmax(array):.4g}]"
         )
-    array.setflags(write=False)
+    if not reusable:
+        array.setflags(write=False)
     return array
 
 
@@ -602,7 +609,9 @@ class TexturedPlaneObject(_Rectangle):
     def texture_image(self) -> np.ndarray:
         """(H, W) float64 albedo in [0, 1]: the texture times the material's albedo."""
         image = load_texture(self.texture) if isinstance(self.texture, Path) else self.texture
-        return image * float(self.material.albedo)  # type: ignore[arg-type]
+        albedo = float(self.material.albedo)  # type: ignore[arg-type]
+        # The texture itself (read-only) when unscaled: the renderer reuses its texture.
+        return image if albedo == 1.0 else image * albedo  # type: ignore[return-value]
 
 
 # --------------------------------------------------------------------------------------------

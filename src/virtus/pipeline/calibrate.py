@@ -601,7 +601,10 @@ def _run_episode(
     processes: int | None = None,
 ) -> CalibrationResult:
     blur = CHECKER_BLUR_M if isinstance(board, CheckerBoard) else BOARD_BLUR_M
-    texture = board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=blur)
+    # One read-only float64 image for every pose: the scenes share it, and the renderer
+    # its texture.
+    texture = np.array(board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=blur), dtype=np.float64)
+    texture.setflags(write=False)
     digest = config_digest(episode)
     timing = {"render_s": 0.0, "observe_s": 0.0, "calibrate_s": 0.0}
     if run is not None:
