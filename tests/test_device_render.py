@@ -186,3 +186,15 @@ def test_a_texture_is_reused_only_while_its_image_is_unchanged() -> None:
     assert _texture(mi, image.copy()) is not first  # another array: its own texture
     image[2, 3] = 0.25  # the same array, changed in place
     assert _texture(mi, image) is not first
+
+
+def test_frames_split_over_several_kernels_are_the_same_frames(monkeypatch) -> None:
+    import virtus.render.synthesis_jit as synthesis_jit
+
+    rig, scene, sequence = small_rig(), default_scene(), default_sequence()
+    options = {"rng": 2, "variant": VARIANT, "sensor": SENSOR_PRESETS["imx174"]}
+    whole = render(rig, scene, sequence, synthesis="jit", **options)
+    monkeypatch.setattr(synthesis_jit, "_MAX_LANES", 5 * 160 * 160)  # 5 frames per kernel
+    split = render(rig, scene, sequence, synthesis="jit", **options)
+    np.testing.assert_array_equal(split.frames, whole.frames)
+    np.testing.assert_array_equal(split.gt.mask_saturated, whole.gt.mask_saturated)

@@ -327,12 +327,13 @@ def percentile_of_positive(values: Any, q: float) -> float | None:
     ranks = sorted({int(np.floor(position)), min(int(np.floor(position)) + 1, total - 1)})
     found = {}
     cumulative = np.cumsum(counts)
-    for rank in ranks:
-        bucket = int(np.searchsorted(cumulative, rank, side="right"))
+    buckets = {rank: int(np.searchsorted(cumulative, rank, side="right")) for rank in ranks}
+    for bucket in sorted(set(buckets.values())):  # usually both ranks share one bucket
         before = int(cumulative[bucket - 1]) if bucket else 0
-        low = _histogram(mi, dr, bits & 0xFFFF, positive & (high == bucket))
-        index = int(np.searchsorted(np.cumsum(low), rank - before, side="right"))
-        found[rank] = np.array([(bucket << 16) | index], dtype=np.uint32).view(np.float32)[0]
+        low = np.cumsum(_histogram(mi, dr, bits & 0xFFFF, positive & (high == bucket)))
+        for rank in (r for r, b in buckets.items() if b == bucket):
+            index = int(np.searchsorted(low, rank - before, side="right"))
+            found[rank] = np.array([(bucket << 16) | index], dtype=np.uint32).view(np.float32)[0]
     pair = np.array([found[ranks[0]], found[ranks[-1]]], dtype=np.float32)
     return float(np.percentile(pair, 100.0 * (position - np.floor(position))))
 

@@ -108,8 +108,9 @@ def synthesize_on_device(
     scale = projector.supersampling
     read = Lookup.bilinear if projector.pixel == Lookup.psf else projector.pixel
     integer = mi.UInt8 if sensor.bit_depth == 8 else mi.UInt32
-    out = dr.zeros(integer, n_frames * n_pixels)
     frames_per_kernel = max(1, min(n_frames, _MAX_LANES // n_pixels))
+    if frames_per_kernel < n_frames:
+        out = dr.zeros(integer, n_frames * n_pixels)
     all_frames = np.arange(n_frames)
     for first in range(0, n_frames, frames_per_kernel):
         count = min(frames_per_kernel, n_frames - first)
@@ -147,8 +148,11 @@ def synthesize_on_device(
                 mi, dr, trace.variant, sensor, seed, frame - first, pixel, n_pixels,
                 all_frames[first : first + count],
             )  # fmt: skip
-        digital = sensor.digitize_jit(radiance, exposure, dr, noise)
-        dr.scatter(out, integer(digital), lane)
+        digital = integer(sensor.digitize_jit(radiance, exposure, dr, noise))
+        if count == n_frames:  # one kernel makes the whole stack: no scatter, no zero fill
+            out = digital
+        else:
+            dr.scatter(out, digital, lane)
         dr.eval(out)
     saturated = dr.zeros(mi.Bool, n_pixels)
     pixel = dr.arange(mi.UInt32, n_pixels)
