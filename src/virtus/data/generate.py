@@ -39,7 +39,7 @@ from virtus import __version__
 from virtus.data.config import MAX_SHARD_BYTES, MAX_WORKERS, DatasetConfig
 from virtus.data.labels import array_layout, sample_arrays
 from virtus.data.sampling import Randomiser, SampleSpec
-from virtus.data.store import ASSETS_DIR, DatasetStore
+from virtus.data.store import ASSETS_DIR, DatasetStore, EncodedSample
 from virtus.errors import InputError
 from virtus.runs import directory_lock, file_digest
 
@@ -67,6 +67,8 @@ TIMING_KEYS = ("render", "labels", "checksum", "compression", "io", "write", "wr
 #: Rendered samples that may wait for their labels in a pipelined run (each holds its
 #: frames and float64 ground truth: ~110 MB at 960 x 960 with 52 frames).
 _LABEL_QUEUE = 2
+#: Threads that label, checksum and compress rendered samples in a pipelined run.
+_SAMPLE_THREADS = 2
 #: In a worker process: the shard buffer kept between tasks (see :func:`_shard_buffer`).
 _IN_WORKER = False
 _WORKER_BUFFER: tuple[tuple[str, str], dict[str, np.ndarray]] | None = None
@@ -181,6 +183,15 @@ def _label(
     return time.perf_counter() - begin
 
 
+def _label_and_encode(
+    store: DatasetStore, spec: Any, capture: Any, buffer: dict[str, np.ndarray], slot: int
+) -> tuple[float, EncodedSample]:
+    """:func:`_label`, then the sample's checksum and chunks
+    (:meth:`~virtus.data.store.DatasetStore.encode_sample`)."""
+    seconds = _label(store, spec, capture, buffer, slot)
+    return seconds, store.encode_sample({name: b[slot] for name, b in buffer.items()})
+
+
 def _synthesis_threads(randomiser: Randomiser) -> int | None:
     cam = randomiser.rig.camera.intrinsics
     return 1 if cam.width * cam.height <= _SMALL_IMAGE_PIXELS else None
@@ -286,20 +297,21 @@ def _write_labelled(
     metas: list[dict[str, Any]],
     labelled: list[Any],
 ) -> tuple[dict[str, float], float]:
-    """Write a shard once all its samples are labelled (a failed labelling fails the write:
-    nothing is written). Returns the write's timing and the labelling seconds."""
-    labels = sum(future.result() for future in labelled)
-    return store.write_shard(shard, buffer, metas), labels
+    """Write a shard once all its samples are labelled and encoded (a failed sample fails
+    the write: nothing is written). Returns the write's timing and the labelling seconds."""
+    done = [future.result() for future in labelled]
+    write = store.write_shard(shard, buffer, metas, [encoded for _, encoded in done])
+    return write, sum(seconds for seconds, _ in done)
 
 
 def _run_pipelined(
     path: Path, shards: list[int], num: int, digest: str, tick: Callable
 ) -> Iterator[dict[str, Any]]:
-    """Shards in this process as a three-stage pipeline: this thread renders, a second
-    labels each rendered sample into a shard buffer, a third writes each labelled shard
-    (its checksums and compression on a few more threads), so a shard is labelled and
-    written while the next is rendered. The label and write work is numpy, SHA-256, the
-    compressors and file I/O, which release the GIL.
+    """Shards in this process as a pipeline: this thread renders; each rendered sample is
+    labelled into a shard buffer, checksummed and compressed on one of
+    :data:`_SAMPLE_THREADS` threads; one more thread writes each shard once its samples are
+    done. So the work behind the renderer is spread over the samples, not the end of each
+    shard; it is numpy, SHA-256, the compressors and file I/O, which release the GIL.
 
     Two shard buffers alternate: a shard's buffer is reused only after the write of the
     shard two before it has finished. At most :data:`_LABEL_QUEUE` rendered samples wait
@@ -313,7 +325,7 @@ def _run_pipelined(
     threads = _synthesis_threads(randomiser)
     buffers: list[dict[str, np.ndarray]] = []
     writes: deque[tuple[Any, int, list[dict[str, Any]], dict[str, float]]] = deque()
-    queue: deque[Any] = deque()  # label futures not yet known to be done
+    queue: deque[Any] = deque()  # sample futures not yet known to be done
     waited = 0.0
 
     def finish() -> dict[str, Any]:
@@ -325,7 +337,7 @@ def _run_pipelined(
         return _result(shard, metas, {**timing, "labels": labels}, write, wait)
 
     with (
-        ThreadPoolExecutor(1, thread_name_prefix="virtus-labels") as labeller,
+        ThreadPoolExecutor(_SAMPLE_THREADS, thread_name_prefix="virtus-labels") as labeller,
         ThreadPoolExecutor(1, thread_name_prefix="virtus-shard-writer") as writer,
     ):
         for number, shard in enumerate(shards):
@@ -341,9 +353,10 @@ def _run_pipelined(
                 spec, capture, seconds = _render(randomiser, index, threads)
                 timing["render"] += seconds
                 metas.append(sample_meta(spec, capture))
-                labelled.append(labeller.submit(_label, store, spec, capture, buffer, slot))
-                queue.append(labelled[-1])
-                del spec, capture  # held by the label task only
+                job = labeller.submit(_label_and_encode, store, spec, capture, buffer, slot)
+                labelled.append(job)
+                queue.append(job)
+                del spec, capture  # held by the job only
                 tick(1)
                 begin = time.perf_counter()
                 while len(queue) > _LABEL_QUEUE:

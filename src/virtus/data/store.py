@@ -27,11 +27,11 @@ Layout of a store directory ``STORE`` (format :data:`STORE_FORMAT`)::
 
 **Completeness.** A sample exists when, and only when, the record of its shard lists it
 and the record carries this store's dataset digest. A writer owns whole shards: it
-renders all the shard's samples, writes each array's shard at once (Zarr's local store
-replaces files atomically; a PNG sample folder is renamed into place), then writes the
-record. A process killed at any moment leaves either a complete, recorded shard or one
-without a record, which the next run writes again with the same bytes (samples are
-deterministic), so nothing is duplicated or half-written.
+renders all the shard's samples, writes each array's shard file at once (written beside
+its place and renamed over it, :mod:`virtus.data.shards`; a PNG sample folder is renamed
+into place), then writes the record. A process killed at any moment leaves either a
+complete, recorded shard or one without a record, which the next run writes again with the
+same bytes (samples are deterministic), so nothing is duplicated or half-written.
 
 **Checksums.** Each sample's checksum (:func:`virtus.data.labels.sample_checksum`) covers
 its arrays as stored; :meth:`DatasetStore.verify` reads every sample back and compares.
@@ -42,6 +42,7 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -66,6 +67,7 @@ __all__ = [
     "STORAGES",
     "STORE_FORMAT",
     "DatasetStore",
+    "EncodedSample",
     "VerifyReport",
     "zarr_compressor",
 ]
@@ -86,6 +88,9 @@ _MAX_RECORD_BYTES = 64 << 20
 #: Threads that checksum and compress a shard while it is written (the work releases the
 #: GIL; more threads than cores only add memory in flight).
 _WRITE_THREADS = max(1, min(4, os.cpu_count() or 1))
+#: Held while a store opens its Zarr arrays and shard encoders (once per process, possibly
+#: from several pipeline threads); module-wide so that a store stays picklable.
+_OPEN_LOCK = threading.Lock()
 #: Files a store may hold besides its own (checked before a directory becomes a store).
 _IGNORED = (".virtus.lock", ".virtus-tmp")
 
@@ -113,6 +118,34 @@ def _timed(work: Callable[..., Any], *args: Any) -> tuple[Any, float]:
     begin = time.perf_counter()
     value = work(*args)
     return value, time.perf_counter() - begin
+
+
+@dataclass(frozen=True)
+class _Done:
+    """A value already computed, read like a :func:`_timed` future (no seconds: counted
+    where it was made)."""
+
+    value: Any
+
+    def result(self) -> tuple[Any, float]:
+        return self.value, 0.0
+
+
+@dataclass(frozen=True)
+class EncodedSample:
+    """One sample ready to be written (:meth:`DatasetStore.encode_sample`).
+
+    Attributes
+    ----------
+    checksum : :func:`virtus.data.labels.sample_checksum` of its arrays.
+    chunks : array name -> its stored chunk (None: only the fill value), for the arrays
+        written by :class:`~virtus.data.shards.ShardEncoder` (zarr storage).
+    seconds : ``checksum`` and ``compression`` seconds it took.
+    """
+
+    checksum: str
+    chunks: dict[str, Any]
+    seconds: dict[str, float]
 
 
 @dataclass
@@ -165,7 +198,7 @@ class DatasetStore:
         self.digest: str = description["identity_digest"]
         self._arrays: dict[str, Any] = {}
         self._encoders: dict[str, ShardEncoder | None] = {}
-        self._pid = os.getpid()
+        self._pid = self._encoders_pid = os.getpid()
 
     # -- opening --------------------------------------------------------------------------
 
@@ -318,11 +351,34 @@ class DatasetStore:
         sample slot at a time, then :meth:`write_shard`; reusable for the next shard)."""
         return {a.name: np.empty((count, *a.shape), dtype=a.dtype) for a in self.layout}
 
+    def encode_sample(self, arrays: dict[str, np.ndarray]) -> EncodedSample:
+        """A sample's checksum and stored chunks, ahead of :meth:`write_shard` (so a pipeline
+        can encode each sample as soon as it is labelled).
+
+        Parameters
+        ----------
+        arrays : name -> the sample's array (layout shape and dtype).
+        """
+        begin = time.perf_counter()
+        checksum = sample_checksum(arrays, self.layout)
+        middle = time.perf_counter()
+        chunks = {}
+        if self.storage == "zarr":
+            for name, encoder in self._shard_encoders().items():
+                if encoder is not None:
+                    chunks[name] = encoder.encode(arrays[name])
+        seconds = {"checksum": middle - begin, "compression": time.perf_counter() - middle}
+        return EncodedSample(checksum, chunks, seconds)
+
     def write_shard(
-        self, shard: int, arrays: dict[str, np.ndarray], metas: list[dict[str, Any]]
+        self,
+        shard: int,
+        arrays: dict[str, np.ndarray],
+        metas: list[dict[str, Any]],
+        encoded: list[EncodedSample] | None = None,
     ) -> dict[str, float]:
         """Write one shard's samples (consecutive, from the shard's first index), then its
-        record. Each sample's ``checksum`` is computed here and added to its metadata.
+        record. Each sample's ``checksum`` is added to its metadata.
 
         Parameters
         ----------
@@ -330,21 +386,29 @@ class DatasetStore:
         arrays : name -> (n, *shape) block of the layout's dtype, sample ``k`` of the shard
             at ``[k]`` (:meth:`shard_buffer`); rows past ``n = len(metas)`` are ignored.
         metas : the ``n`` samples' metadata (:func:`virtus.data.generate.sample_meta`).
+        encoded : the samples' :meth:`encode_sample` of ``arrays``, if already made (else
+            checksums and chunks are computed here, on a few threads).
 
         Returns
         -------
         Seconds spent: ``checksum`` and ``compression`` (work summed over the threads that
-        do it side by side), ``io`` (writing the files and the record), ``wall`` (the call).
+        do it side by side; ``encoded``'s included), ``io`` (writing the files and the
+        record), ``wall`` (the call).
         """
         start_time = time.perf_counter()
         start = shard * self.shard_samples
         count = len(metas)
-        if not 1 <= count <= self.shard_samples or any(
-            arrays[a.name].shape[0] < count for a in self.layout
+        if (
+            not 1 <= count <= self.shard_samples
+            or any(arrays[a.name].shape[0] < count for a in self.layout)
+            or (encoded is not None and len(encoded) != count)
         ):
             raise InputError("samples", f"1..{self.shard_samples} samples with metadata", count)
         samples = [{a.name: arrays[a.name][k] for a in self.layout} for k in range(count)]
         timing = {"checksum": 0.0, "compression": 0.0, "io": 0.0}
+        for sample in encoded or []:
+            for stage, seconds in sample.seconds.items():
+                timing[stage] += seconds
 
         def result(future: Any, stage: str) -> Any:
             value, seconds = future.result()
@@ -354,14 +418,23 @@ class DatasetStore:
         # SHA-256 and the compressors release the GIL: checksums and chunks are computed on
         # a few threads while this one writes each array's shard as soon as it is encoded.
         with ThreadPoolExecutor(_WRITE_THREADS) as pool:
-            checksums = [
-                pool.submit(_timed, sample_checksum, arrays_k, self.layout) for arrays_k in samples
-            ]
+            if encoded is None:
+                checksums = [
+                    pool.submit(_timed, sample_checksum, arrays_k, self.layout)
+                    for arrays_k in samples
+                ]
+            else:
+                checksums = [_Done(sample.checksum) for sample in encoded]
             io_start = time.perf_counter()
             if self.storage == "zarr":
                 encoders = self._shard_encoders()
-                encoded = {
-                    name: [pool.submit(_timed, encoder.encode, s[name]) for s in samples]
+                chunks = {
+                    name: [
+                        pool.submit(_timed, encoder.encode, s[name])
+                        if encoded is None
+                        else _Done(encoded[k].chunks[name])
+                        for k, s in enumerate(samples)
+                    ]
                     for name, encoder in encoders.items()
                     if encoder is not None
                 }
@@ -369,9 +442,9 @@ class DatasetStore:
                 for spec in self.layout:
                     encoder = encoders[spec.name]
                     if encoder is not None:
-                        chunks = [result(f, "compression") for f in encoded[spec.name]]
+                        data = [result(f, "compression") for f in chunks[spec.name]]
                         io_start = time.perf_counter()
-                        encoder.write(shard, chunks)
+                        encoder.write(shard, data)
                         timing["io"] += time.perf_counter() - io_start
                     else:  # a layout the direct writer does not handle: through Zarr
                         io_start = time.perf_counter()
@@ -504,15 +577,23 @@ class DatasetStore:
 
     def _shard_encoders(self) -> dict[str, ShardEncoder | None]:
         """Name -> the direct shard writer of each array (None: written through Zarr)."""
-        if not self._encoders or self._pid != os.getpid():
-            arrays = self._zarr_arrays()
-            self._encoders = {
-                name: ShardEncoder.for_array(array, self.path / name)
-                for name, array in arrays.items()
-            }
-        return self._encoders
+        with _OPEN_LOCK:
+            if not self._encoders or self._encoders_pid != os.getpid():
+                arrays = self._zarr_arrays_locked()
+                self._encoders = {
+                    name: ShardEncoder.for_array(array, self.path / name)
+                    for name, array in arrays.items()
+                }
+                self._encoders_pid = os.getpid()
+            return self._encoders
 
     def _zarr_arrays(self) -> dict[str, Any]:
+        with _OPEN_LOCK:
+            return self._zarr_arrays_locked()
+
+    def _zarr_arrays_locked(self) -> dict[str, Any]:
+        """The Zarr arrays, opened once per process (the caller holds :data:`_OPEN_LOCK`:
+        pipeline threads encode samples side by side)."""
         import zarr
 
         if not self._arrays or self._pid != os.getpid():
