@@ -11,9 +11,10 @@ before a plane) with :func:`virtus.data.generate`, once per ``--workers`` value 
   samples: render (trace + synthesis of every frame), labels (ground truth -> phase, order,
   numerator/denominator, modulation, masks, object ids), checksum (SHA-256 of every stored
   byte), compression (chunk encoding), io (shard files and records), write_wait (rendering
-  held up by the shard writer). With one worker a shard is written on a background thread
-  while the next is rendered, and checksums and compression run on several threads: the
-  stages overlap, so they sum to more than the wall time;
+  held up by the work behind it). With one worker, each rendered sample is labelled,
+  checksummed and compressed on one of two threads while the next one renders, and a third
+  thread writes the shard files: the stages overlap, so they sum to more than the wall
+  time, and each runs slower than alone (two cores shared);
 * for context, the renderer alone on the same scenes (``Scanner.capture``, frames/s): the
   ceiling a dataset run can reach on this machine;
 * with ``--codecs``, every codec and level on one stored sample: compression seconds on one

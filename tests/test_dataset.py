@@ -327,6 +327,34 @@ def test_shards_written_directly_are_the_bytes_zarr_writes(tmp_path, codec) -> N
     assert ShardEncoder.for_array(unsupported, tmp_path / "c_order_chunks") is None
 
 
+def test_a_failed_sample_leaves_its_shard_unrecorded_and_the_rerun_completes(
+    tmp_path, monkeypatch
+) -> None:
+    """In the one-process pipeline, labels are made on other threads than the renderer: a
+    sample that fails there must fail the run and keep its shard out of the manifest."""
+    import importlib
+
+    generation = importlib.import_module("virtus.data.generate")  # the module, not the function
+    config = load_config(tiny_config(tmp_path))
+    generate(config, tmp_path / "reference", num=12)
+    calls = {"n": 0}
+    real = generation.sample_arrays
+
+    def failing(*args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 8:  # sample 7: the last of shard 1, whose write is then queued
+            raise RuntimeError("labelling failed")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(generation, "sample_arrays", failing)
+    with pytest.raises(RuntimeError, match="labelling failed"):
+        generate(config, tmp_path / "store", num=12)
+    assert 1 not in DatasetStore.open(tmp_path / "store").records()
+    monkeypatch.setattr(generation, "sample_arrays", real)
+    generate(config, tmp_path / "store", num=12)
+    assert store_files(tmp_path / "store") == store_files(tmp_path / "reference")
+
+
 def test_png_storage_holds_the_same_samples(tmp_path, capsys) -> None:
     config = tiny_config(tmp_path, num_samples=4)
     zarr_store, png_store = tmp_path / "zarr", tmp_path / "png"
