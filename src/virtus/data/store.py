@@ -95,6 +95,13 @@ _OPEN_LOCK = threading.Lock()
 _IGNORED = (".virtus.lock", ".virtus-tmp")
 
 
+#: Blosc block size (bytes) of a new store. Blosc's own choice at level 1 is a few tens of
+#: kB; 1 MiB blocks compress a 960 x 960 sample about 1.6x faster and ~6 % smaller with
+#: blosc-auto (blosc-zstd: 1.7x faster, 14 % smaller). A store keeps the block size it was
+#: made with (it is in each array's Zarr metadata, which the shard writer follows).
+BLOSC_BLOCK_BYTES = 1 << 20
+
+
 def zarr_compressor(codec: str, level: int, array: str) -> Any:
     """The Zarr compressor of array ``array`` for a store's ``storage.codec`` and ``level``
     (:data:`~virtus.data.config.CODECS`; None: stored raw). ``blosc-auto`` compresses the
@@ -110,7 +117,7 @@ def zarr_compressor(codec: str, level: int, array: str) -> Any:
     if codec == "blosc-auto":
         codec = "blosc-zstd" if array == "frames" else "blosc-lz4"
     cname = codec.removeprefix("blosc-")
-    return BloscCodec(cname=cname, clevel=level, shuffle="shuffle")
+    return BloscCodec(cname=cname, clevel=level, shuffle="shuffle", blocksize=BLOSC_BLOCK_BYTES)
 
 
 def _timed(work: Callable[..., Any], *args: Any) -> tuple[Any, float]:
