@@ -198,3 +198,17 @@ def test_frames_split_over_several_kernels_are_the_same_frames(monkeypatch) -> N
     split = render(rig, scene, sequence, synthesis="jit", **options)
     np.testing.assert_array_equal(split.frames, whole.frames)
     np.testing.assert_array_equal(split.gt.mask_saturated, whole.gt.mask_saturated)
+
+
+def test_frames_are_handed_to_pytorch_without_a_copy() -> None:
+    torch = pytest.importorskip("torch")
+    result = render_device(
+        small_rig(), default_scene(), default_sequence(), projector=ProjectorModel(),
+        sensor=Sensor(), variant=VARIANT,
+    )  # fmt: skip
+    tensor = result.frames.torch()
+    assert tensor.dtype == torch.uint8 and tuple(tensor.shape) == (52, 160, 160)
+    np.testing.assert_array_equal(tensor.numpy(), result.frames.numpy())
+    # The same memory: a change through the tensor shows in the device array.
+    tensor[0, 0, 0] = 77
+    assert int(result.frames.data[0]) == 77
