@@ -183,7 +183,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=8)
     parser.add_argument("--shard", type=int, default=4, help="samples per shard")
-    parser.add_argument("--codec", default="blosc-auto", choices=list(CODECS))
+    parser.add_argument("--codec", default="blosc-zstd", choices=list(CODECS))
     parser.add_argument("--level", type=int, default=1)
     parser.add_argument("--label-dtype", default="float32", choices=["float32", "float64"])
     parser.add_argument("--workers", type=int, nargs="+", default=[1])

@@ -45,7 +45,7 @@ number; lists of choices are drawn uniformly per sample)::
     turntable: {views: 12, tilt_deg: 15}                      # scan mode
     board: {spec: "4x7"}                                      # calibration mode
     ablation: {materials: [matte, glossy, metal, reflective], ambients: [dark, ambient]}
-    storage: {shard_samples: 8, codec: blosc-auto, level: 1, label_dtype: float32}
+    storage: {shard_samples: 8, codec: blosc-zstd, level: 1, label_dtype: float32}
 
 Units: metres, degrees where a key says ``_deg``, projector px for periods.
 """
@@ -94,10 +94,10 @@ MAX_SHARD_SAMPLES = 1024
 MAX_SHARD_BYTES = 4 << 30
 #: Mesh files read from a mesh folder, at most this many.
 MAX_MESH_FILES = 10_000
-#: Storage codecs: Blosc (byte shuffle) with zstd or lz4 for every array, ``blosc-auto``
-#: (the default: frames with blosc-zstd, labels with blosc-lz4; see
-#: :func:`virtus.data.store.zarr_compressor`), plain zstd, none.
-CODECS = ("blosc-auto", "blosc-zstd", "blosc-lz4", "zstd", "none")
+#: Storage codecs: Blosc (byte shuffle) with zstd (the default) or lz4 for every array,
+#: ``blosc-auto`` (frames with blosc-zstd, labels with blosc-lz4: less compression work,
+#: more bytes; see :func:`virtus.data.store.zarr_compressor`), plain zstd, none.
+CODECS = ("blosc-zstd", "blosc-auto", "blosc-lz4", "zstd", "none")
 #: Object source types.
 SOURCE_TYPES = ("sphere", "box", "freeform", "mesh_folder")
 #: Fringe codings built from ``fringes`` (see :mod:`virtus.patterns`).
@@ -400,7 +400,7 @@ class DatasetConfig:
     ablation_materials: tuple[str, ...] = ("matte", "glossy", "metal", "reflective")
     ablation_ambients: tuple[str, ...] = ("dark", "ambient")
     shard_samples: int = 8
-    codec: str = "blosc-auto"
+    codec: str = "blosc-zstd"
     level: int = 1
     label_dtype: str = "float32"
 
@@ -470,7 +470,7 @@ class DatasetConfig:
         if sources and not sum(s.weight for s in sources) > 0:
             raise InputError("objects.sources", "a positive total weight", 0)
 
-        codec = storage.get("codec", "blosc-auto")
+        codec = storage.get("codec", "blosc-zstd")
         if codec not in CODECS:
             raise InputError("storage.codec", f"one of {', '.join(CODECS)}", codec)
         label_dtype = storage.get("label_dtype", "float32")

@@ -96,8 +96,8 @@ _IGNORED = (".virtus.lock", ".virtus-tmp")
 
 
 #: Blosc block size (bytes) of a new store. Blosc's own choice at level 1 is a few tens of
-#: kB; 1 MiB blocks compress a 960 x 960 sample about 1.6x faster and ~6 % smaller with
-#: blosc-auto (blosc-zstd: 1.7x faster, 14 % smaller). A store keeps the block size it was
+#: kB; 1 MiB blocks compress a 960 x 960 sample about 1.7x faster and 14 % smaller with
+#: blosc-zstd (blosc-auto: 1.6x faster, 6 % smaller). A store keeps the block size it was
 #: made with (it is in each array's Zarr metadata, which the shard writer follows).
 BLOSC_BLOCK_BYTES = 1 << 20
 
@@ -105,9 +105,12 @@ BLOSC_BLOCK_BYTES = 1 << 20
 def zarr_compressor(codec: str, level: int, array: str) -> Any:
     """The Zarr compressor of array ``array`` for a store's ``storage.codec`` and ``level``
     (:data:`~virtus.data.config.CODECS`; None: stored raw). ``blosc-auto`` compresses the
-    frames with blosc-zstd and every label with blosc-lz4: at 960 x 960 zstd makes the frames
-    2.4x smaller than lz4 does, while the real-valued labels come out within ~5 % with lz4
-    at a quarter of zstd's time (``benchmarks/bench_dataset.py --codecs``)."""
+    frames with blosc-zstd and every label with blosc-lz4: zstd makes the frames much
+    smaller than lz4 does, while most real-valued labels come out nearly as small with lz4
+    at a fraction of zstd's time. At 960 x 960, level 1, one thread: blosc-zstd 0.19 s and
+    35 MB a sample, blosc-auto 0.12 s and 39 MB (``benchmarks/bench_dataset.py --codecs``);
+    on the 2-core benchmark machine both give the same images/s within its noise, so the
+    default stays the smaller blosc-zstd."""
     from zarr.codecs import BloscCodec, ZstdCodec
 
     if codec == "none":
