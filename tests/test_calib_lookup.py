@@ -14,13 +14,14 @@ from virtus.scanner import Scanner
 @pytest.mark.slow
 def test_the_scanners_lookup_makes_every_calibration_capture(tmp_path, monkeypatch):
     seen = []
-    observe = job.observe_pose
+    capture = Scanner.capture
 
-    def recording(capture, board, name):
-        seen.append(capture.render["lookup"])
-        return observe(capture, board, name)
+    def recording(self, *args, **kwargs):
+        made = capture(self, *args, **kwargs)
+        seen.append(made.render["lookup"])
+        return made
 
-    monkeypatch.setattr(job, "observe_pose", recording)
+    monkeypatch.setattr(Scanner, "capture", recording)
     projector = ProjectorModel(pixel=Lookup.bilinear)
     scanner = Scanner(rig=quarter_rig(), projector=projector, spp=1)
     result = job.calibrate_rig(scanner, board="4x7", poses="random:3", rng=1, out_dir=tmp_path)
