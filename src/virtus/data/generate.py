@@ -86,8 +86,8 @@ class GenerateReport:
     rendered : samples rendered by this call (0 when the store was already complete).
     seconds : wall time of the rendering phase.
     timing_s : seconds per stage (:data:`TIMING_KEYS`) summed over the shards rendered
-        here, across all workers and threads; stages that run side by side (a shard is
-        written while the next is rendered) sum to more than ``seconds``.
+        here, across all workers and threads; stages that run side by side (samples are
+        labelled and written while later ones render) sum to more than ``seconds``.
     """
 
     path: Path
