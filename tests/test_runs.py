@@ -225,3 +225,20 @@ def test_first_difference_names_the_path():
     assert first_difference({"a": 1}, {"a": 1, "z": 0}) == (
         "z: absent here, set in the existing run"
     )
+
+
+def test_a_staging_directory_removed_by_another_writer_is_made_again(tmp_path):
+    # Another process finishing its own write removes the shared staging directory when
+    # it is empty: here, right before this writer's first file.
+    calls = []
+
+    def write(staging):
+        calls.append(staging)
+        if len(calls) == 1:
+            staging.rmdir()
+        (staging / "a.json").write_text("{}")
+
+    atomic_write(tmp_path / "a.json", write)
+    assert len(calls) == 2
+    assert (tmp_path / "a.json").read_text() == "{}"
+    assert not (tmp_path / TMP_DIR).exists()

@@ -61,6 +61,8 @@ LOCK_FILE = ".virtus.lock"
 RUN_FORMAT = "virtus.run/1"
 #: Staging directory (beside the targets) of the files :func:`atomic_write_files` writes.
 TMP_DIR = ".virtus-tmp"
+#: Times a write is retried when another writer removed the shared staging directory.
+_STAGING_ATTEMPTS = 5
 #: Keys of ``run.json`` that must match for a run to be resumed.
 _IDENTITY = ("command", "virtus_version", "config", "inputs")
 
@@ -104,8 +106,7 @@ def atomic_write_files(
     staging = directory / TMP_DIR
     targets = [directory / name for name in names]
     try:
-        staging.mkdir(parents=True, exist_ok=True)
-        write(staging)
+        _write_staged(staging, write)
         for name, target in zip(names, targets, strict=True):
             os.replace(staging / name, target)
     except OSError as error:
@@ -120,6 +121,21 @@ def atomic_write_files(
         with contextlib.suppress(OSError):  # still holds another writer's files
             staging.rmdir()
     return targets
+
+
+def _write_staged(staging: Path, write: Callable[[Path], object]) -> None:
+    """``write(staging)`` into a staging directory that other writers share: one that
+    finishes removes it when it is empty, which can happen between this writer's ``mkdir``
+    and its first file (seen with 12 dataset workers); then it is made again and the
+    write retried (nothing of this writer's was in it yet)."""
+    for attempt in range(_STAGING_ATTEMPTS):
+        staging.mkdir(parents=True, exist_ok=True)
+        try:
+            write(staging)
+            return
+        except FileNotFoundError:
+            if staging.is_dir() or attempt + 1 == _STAGING_ATTEMPTS:
+                raise
 
 
 def atomic_write(path: str | os.PathLike[str], write: Callable[[Path], object]) -> Path:
