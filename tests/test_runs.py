@@ -232,11 +232,11 @@ def test_a_staging_directory_removed_by_another_writer_is_made_again(tmp_path):
     # it is empty: here, right before this writer's first file.
     calls = []
 
-    def write(staging):
-        calls.append(staging)
+    def write(tmp):
+        calls.append(tmp)
         if len(calls) == 1:
-            staging.rmdir()
-        (staging / "a.json").write_text("{}")
+            tmp.parent.rmdir()  # the staging directory, still empty
+        tmp.write_text("{}")
 
     atomic_write(tmp_path / "a.json", write)
     assert len(calls) == 2
