@@ -140,7 +140,8 @@ def render_device(
 ) -> DeviceRendering:
     """:func:`render` without leaving the device: trace, synthesis and the sensor run where
     Mitsuba runs (a GPU with ``cuda_ad_rgb``; the CPU with ``llvm_ad_rgb``, the twin the
-    tests check). Only the auto exposure reads the white frame on the host (one (P,) copy).
+    tests check). Nothing per pixel reaches the host: the auto exposure's percentile is found
+    on the device (two 256 KiB histograms are copied).
 
     Parameters
     ----------
@@ -211,8 +212,9 @@ def render(
     cam2world : camera pose in the scene's world frame (default identity).
     sensor : a full :class:`~virtus.sensor.Sensor` (overrides ``exposure`` and ``bit_depth``).
     synthesis : where frames are synthesised: ``"sparse"`` (scipy sparse products on the
-        host, fastest on CPUs), ``"jit"`` (Dr.Jit gathers where Mitsuba runs, fastest on
-        GPUs), ``"auto"`` (``"jit"`` for CUDA variants, else ``"sparse"``). Same frames.
+        host, fastest on CPUs), ``"jit"`` (the device-resident path of :func:`render_device`,
+        then one copy to the host; fastest on GPUs), ``"auto"`` (``"jit"`` for CUDA variants,
+        else ``"sparse"``). Same frames but for 1 DN where a value sits on a rounding edge.
     threads, block_pixels : host synthesis threads and block size (the frames do not depend
         on them; defaults: every CPU, 16384 pixels).
     bounces, projector_lens, camera_lens, aperture_samples : light transport and lenses, as
