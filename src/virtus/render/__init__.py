@@ -7,22 +7,33 @@ by the camera model of :mod:`virtus.sensor`, with :mod:`virtus.groundtruth` from
 * :mod:`~virtus.render.mitsuba_scene` -- virtus scene -> Mitsuba shapes and BSDFs.
 * :mod:`~virtus.render.tracing` -- camera rays, hits, projector coordinates, shading.
 * :mod:`~virtus.render.synthesis` -- all frames from the trace (sparse lookups, host).
-* :mod:`~virtus.render.synthesis_jit` -- the same with Dr.Jit gathers on the device
-  (used with CUDA variants).
+* :mod:`~virtus.render.device` -- device-resident passes: taps and frames kept where they
+  were traced (:func:`trace_device`, :class:`~virtus.render.device.DeviceFrames`: one
+  transfer to the host, or DLPack to PyTorch); :func:`render_device` is the whole pose.
+* :mod:`~virtus.render.synthesis_jit` -- every frame of a pose synthesised and digitised in
+  one device kernel (the GPU path; its CPU twin runs on ``llvm_ad_rgb``).
+* :mod:`~virtus.render.sensor_jit` -- the sensor's counter-based noise streams on the device.
+* :mod:`~virtus.render.decode_jit` -- fringe decoding on the device.
 * :mod:`~virtus.render.reference` -- Mitsuba's own projector emitter, one render per frame
   (validation and benchmarks).
 """
 
 from virtus.render.backend import choose_variant
-from virtus.render.pipeline import Rendering, render
+from virtus.render.device import DeviceFrames, DeviceTrace, trace_device
+from virtus.render.pipeline import DeviceRendering, Rendering, render, render_device
 from virtus.render.synthesis import synthesize
 from virtus.render.tracing import Trace, trace
 
 __all__ = [
+    "DeviceFrames",
+    "DeviceRendering",
+    "DeviceTrace",
     "Rendering",
     "Trace",
     "choose_variant",
     "render",
+    "render_device",
     "synthesize",
     "trace",
+    "trace_device",
 ]
