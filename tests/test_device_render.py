@@ -21,6 +21,7 @@ from virtus.render.sensor_jit import frame_keys, standard_normal_jit
 from virtus.render.tracing import trace
 from virtus.scene import default_scene
 from virtus.sensor import SENSOR_PRESETS, Sensor, standard_normal
+from virtus.transforms import Pose
 
 VARIANT = "llvm_ad_rgb"
 #: Frames may differ by 1 DN where a value sits on a rounding edge: float32 sums in another
@@ -212,3 +213,16 @@ def test_frames_are_handed_to_pytorch_without_a_copy() -> None:
     # The same memory: a change through the tensor shows in the device array.
     tensor[0, 0, 0] = 77
     assert int(result.frames.data[0]) == 77
+
+
+def test_scenes_that_read_files_are_not_cached(tmp_path) -> None:
+    import trimesh
+
+    from virtus.render.tracing import _reads_files
+    from virtus.scene import MeshObject, Scene
+
+    path = tmp_path / "box.stl"
+    trimesh.creation.box((0.1, 0.1, 0.1)).export(path)
+    mesh = MeshObject(path=path, pose=Pose(np.eye(3), (0.0, 0.0, 1.0)))
+    assert _reads_files(Scene([mesh]))
+    assert not _reads_files(default_scene())

@@ -68,6 +68,7 @@ import dataclasses
 import functools
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -539,12 +540,27 @@ class Pass:
 def _mitsuba_scene(variant: str, scene: Scene) -> Any:
     """The Mitsuba scene of ``scene``; poses of one scene (a calibration's camera moves, a
     turntable's views, a benchmark) reuse the last two loaded (its BVH build is ~1.5 ms
-    of a ~10 ms GPU pass)."""
-    try:
-        return _cached_scene(variant, scene)
-    except TypeError:  # a scene holding unhashable values is loaded each time
-        mi, dr, _ = mitsuba(variant)
-        return mi.load_dict(scene_dict(mi, dr, scene))
+    of a ~10 ms GPU pass). Scenes that read files (meshes, texture images) are loaded each
+    time, so an edited file is never rendered stale."""
+    if not _reads_files(scene):
+        try:
+            return _cached_scene(variant, scene)
+        except TypeError:  # a scene holding unhashable values is loaded each time
+            pass
+    mi, dr, _ = mitsuba(variant)
+    return mi.load_dict(scene_dict(mi, dr, scene))
+
+
+def _reads_files(value: Any) -> bool:
+    """True when a scene (or any model, list or tuple inside it) names a file."""
+    if isinstance(value, Path):
+        return True
+    if isinstance(value, list | tuple):
+        return any(_reads_files(item) for item in value)
+    fields = getattr(type(value), "model_fields", None)
+    if fields is None:
+        return False
+    return any(_reads_files(getattr(value, name)) for name in fields)
 
 
 @functools.lru_cache(maxsize=2)
