@@ -1110,14 +1110,45 @@ class PatternSequence:
             )
             modulations += decoded.pop("modulations")
             backgrounds += decoded.pop("backgrounds")
-            per_pixel_check = plan.method in ("temporal", "heterodyne") or (
-                plan.code is not None and plan.code.coding.complement
-            )
-            if neighbour_check or repair or (neighbour_check is None and not per_pixel_check):
+            if self._runs_neighbour_check(direction, neighbour_check, repair):
                 repaired += self._check_neighbours(direction, decoded, repair)
             decoded["flags"] &= decoded["valid"]
             decoded["phase"] = np.where(decoded["valid"], decoded["phase"], np.nan)
             out[direction] = decoded
+        return self._result(
+            out,
+            modulation=np.minimum.reduce(modulations) if modulations else nan,
+            background=np.mean(backgrounds, axis=0) if backgrounds else nan,
+            repaired=repaired,
+            full_scale=full_scale,
+        )
+
+    def _runs_neighbour_check(
+        self, direction: str, neighbour_check: bool | None, repair: bool
+    ) -> bool:
+        """Whether :meth:`decode` compares ``direction``'s orders with neighbours: when
+        asked, when repairing, and by default where no per-pixel check exists (codes without
+        the complementary frame, the window method)."""
+        plan = self._plans[direction]
+        per_pixel_check = plan.method in ("temporal", "heterodyne") or (
+            plan.code is not None and plan.code.coding.complement
+        )
+        return bool(neighbour_check or repair or (neighbour_check is None and not per_pixel_check))
+
+    def _result(
+        self,
+        out: dict[str, dict[str, Any]],
+        *,
+        modulation: np.ndarray,
+        background: np.ndarray,
+        repaired: int,
+        full_scale: float,
+    ) -> DecodeResult:
+        """The :class:`DecodeResult` of per-direction decodes (``out[d]``: ``phase`` NaN
+        where invalid, ``valid``, ``flags`` within it, ``modulation``; every direction of
+        :data:`DIRECTIONS`), warning when many pixels are flagged. Shared by the host
+        decoder and the device decoder's :meth:`virtus.render.decode_jit.DeviceDecode.to_host`."""
+        shape = out["v"]["valid"].shape
         mask = np.full(shape, bool(self.directions))  # no fringes: nothing is valid
         for direction in self.directions:
             mask &= out[direction]["valid"]
@@ -1126,8 +1157,8 @@ class PatternSequence:
             proj_uv=np.stack(coordinates, axis=-1),
             phase_v=out["v"]["phase"],
             phase_h=out["h"]["phase"],
-            modulation=np.minimum.reduce(modulations) if modulations else nan,
-            background=np.mean(backgrounds, axis=0) if backgrounds else nan,
+            modulation=modulation,
+            background=background,
             mask=mask,
             mask_v=out["v"]["valid"],
             mask_h=out["h"]["valid"],

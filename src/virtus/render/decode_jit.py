@@ -50,7 +50,6 @@ from virtus.patterns import (
     DecodeResult,
     PatternSequence,
     _Plan,
-    _warn_if_flagged,
 )
 from virtus.render.backend import mitsuba
 
@@ -157,8 +156,7 @@ class DeviceDecode:
                 f"{len(sequence)} frames, directions {sequence.directions}",
             )
         checks = {
-            d: _runs_neighbour_check(sequence._plans[d], neighbour_check, repair)
-            for d in self.directions
+            d: sequence._runs_neighbour_check(d, neighbour_check, repair) for d in self.directions
         }
         planes = self._host_planes(any(checks.values()))
         shape = (self.height, self.width)
@@ -185,34 +183,14 @@ class DeviceDecode:
                 decoded["flags"] &= decoded["valid"]
                 decoded["phase"] = np.where(decoded["valid"], decoded["phase"], np.nan)
             out[direction] = decoded
-        mask = np.full(shape, bool(self.directions))
-        for direction in self.directions:
-            mask &= out[direction]["valid"]
         present = [out[d]["modulation"] for d in self.directions]
-        plans = sequence._plans
-        result = DecodeResult(
-            proj_uv=np.stack(
-                [sequence._coordinate(d, out[d]["phase"]) for d in DIRECTIONS], axis=-1
-            ),
-            phase_v=out["v"]["phase"],
-            phase_h=out["h"]["phase"],
+        return sequence._result(
+            out,
             modulation=np.minimum.reduce(present) if present else nan,
             background=planes["background"] if present else nan,
-            mask=mask,
-            mask_v=out["v"]["valid"],
-            mask_h=out["h"]["valid"],
-            period_v=plans["v"].periods[0] if "v" in plans else None,
-            period_h=plans["h"].periods[0] if "h" in plans else None,
-            flagged=out["v"]["flags"] | out["h"]["flags"],
-            flagged_v=out["v"]["flags"],
-            flagged_h=out["h"]["flags"],
-            modulation_v=out["v"]["modulation"],
-            modulation_h=out["h"]["modulation"],
             repaired=repaired,
             full_scale=self.full_scale,
         )
-        _warn_if_flagged(result)
-        return result
 
     def _host_planes(self, wrapped: bool) -> dict[str, np.ndarray]:
         """(H, W) float64 host copies of the maps ``to_host`` needs, from one transfer: the
@@ -725,11 +703,3 @@ def _unwrap_heterodyne(
         residual = dr.maximum(residual, dr.abs(step))
         reference = period
     return absolute, residual
-
-
-def _runs_neighbour_check(plan: _Plan, neighbour_check: bool | None, repair: bool) -> bool:
-    """Whether ``PatternSequence.decode`` runs the neighbour check on this direction."""
-    per_pixel_check = plan.method in ("temporal", "heterodyne") or (
-        plan.code is not None and plan.code.coding.complement
-    )
-    return bool(neighbour_check or repair or (neighbour_check is None and not per_pixel_check))
