@@ -38,7 +38,7 @@ import numpy as np
 import yaml
 
 from virtus.checks import check_shape
-from virtus.errors import InputError
+from virtus.errors import InputError, VirtusError
 
 __all__ = [
     "MAX_ARRAY_BYTES",
@@ -467,6 +467,22 @@ def read_yaml(
 # --------------------------------------------------------------------------------------------
 # .npy arrays
 # --------------------------------------------------------------------------------------------
+
+
+def load_npz(path: str | os.PathLike[str], what: str) -> dict[str, np.ndarray]:
+    """Every array of an ``.npz`` file a run wrote (pose and view files), without
+    unpickling anything.
+
+    Raises
+    ------
+    VirtusError : ``"<path>: not a readable <what> (<reason>)"`` for a missing, truncated or
+        foreign file.
+    """
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return {key: data[key] for key in data.files}
+    except (OSError, ValueError, KeyError, EOFError) as error:
+        raise VirtusError(f"{path}: not a readable {what} ({error})") from None
 
 
 def load_npy(

@@ -89,6 +89,7 @@ from virtus.runs import (
     directory_lock,
     write_json_atomic,
 )
+from virtus.safeio import load_npz, read_json
 from virtus.scanner import Scanner
 from virtus.sensor import MAX_SEED, as_seed
 
@@ -342,11 +343,7 @@ def _load_observation(
     path: Path, pose: BoardPose, seed: int | None, episode: str | None
 ) -> PoseObservation:
     """Read a pose file, checking it belongs to this pose (and episode, when given)."""
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {key: data[key] for key in data.files}
-    except (OSError, ValueError, KeyError, EOFError) as error:
-        raise VirtusError(f"{path}: not a readable pose file ({error})") from None
+    arrays = load_npz(path, "pose file")
     board2cam = arrays.get("board2cam")
     mismatch = None
     if board2cam is None or not np.array_equal(board2cam, pose.board2cam.matrix):
@@ -686,8 +683,6 @@ def recalibrate(out_dir: str | Path, *, fix_intrinsics: bool | None = None) -> C
     ------
     VirtusError : as :func:`calibrate_rig`'s solve; a pose file of another pose.
     """
-    from virtus.safeio import read_json
-
     out_dir = Path(out_dir)
     with directory_lock(out_dir):
         episode = read_json(out_dir / EPISODE_FILE, "calibration episode", expect=dict)

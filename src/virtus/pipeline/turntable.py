@@ -52,6 +52,7 @@ from virtus.pipeline.scan import (
 from virtus.pipeline.scenes import FREEFORM_CENTRE_M
 from virtus.ply import write_ply
 from virtus.runs import RunDirectory, claim_run, config_digest
+from virtus.safeio import load_npz
 from virtus.scanner import Scanner
 from virtus.transforms import Pose
 
@@ -304,11 +305,7 @@ def _run_views(
 
 def _load_view(path: Path, object2cam: Pose, episode: str) -> tuple[np.ndarray, tuple]:
     """A finished view's points and refinement, checked to belong to this run and pose."""
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {key: data[key] for key in data.files}
-    except (OSError, ValueError, KeyError, EOFError) as error:
-        raise VirtusError(f"{path}: not a readable view file ({error})") from None
+    arrays = load_npz(path, "view file")
     points = arrays.get("points")
     if (
         str(arrays.get("episode", "")) != episode
