@@ -65,3 +65,10 @@ def mitsuba(variant: str | None = None) -> tuple[ModuleType, ModuleType, str]:
     if mi.variant() != name:
         mi.set_variant(name)
     return mi, dr, name
+
+
+def variant_of(array: object) -> str:
+    """The supported variant whose backend holds a Dr.Jit array (CUDA or LLVM)."""
+    import drjit as dr
+
+    return "cuda_ad_rgb" if dr.backend_v(array) == dr.JitBackend.CUDA else "llvm_ad_rgb"

@@ -51,7 +51,7 @@ from virtus.patterns import (
     PatternSequence,
     _Plan,
 )
-from virtus.render.backend import mitsuba
+from virtus.render.backend import mitsuba, variant_of
 
 __all__ = ["DeviceDecode", "decode_on_device", "frames_to_device", "supports"]
 
@@ -60,8 +60,6 @@ TWO_PI = _phase.TWO_PI
 METHODS = ("code", "temporal", "heterodyne", "window")
 #: Precisions of the per-pixel arithmetic.
 PRECISIONS = ("float32", "float64")
-#: Variant of each Dr.Jit backend, to decode frames in the variant that made them.
-_VARIANT_OF_BACKEND = {"CUDA": "cuda_ad_rgb", "LLVM": "llvm_ad_rgb"}
 #: Bit planes of the packed validity word that :meth:`DeviceDecode.to_host` transfers.
 _BIT_MASK_V, _BIT_MASK_H, _BIT_FLAG_V, _BIT_FLAG_H = 1, 2, 4, 8
 
@@ -393,7 +391,7 @@ def _backend(frames: Any, variant: str | None) -> tuple[Any, Any, str]:
             "frames", "a flat Dr.Jit array (see frames_to_device)", type(frames).__name__
         )
     if variant is None:
-        variant = _VARIANT_OF_BACKEND.get(dr.backend_v(frames).name)
+        variant = variant_of(frames)
     mi, dr, name = mitsuba(variant)
     if dr.backend_v(frames) != dr.backend_v(mi.Float):
         raise InputError("frames", f"an array of the {name} backend", type(frames).__name__)

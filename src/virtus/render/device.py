@@ -29,7 +29,7 @@ import numpy as np
 from virtus.devices import Rig
 from virtus.groundtruth import GroundTruth
 from virtus.optics import Intrinsics, ThinLens
-from virtus.render.backend import mitsuba
+from virtus.render.backend import mitsuba, variant_of
 from virtus.render.tracing import Pass, Trace, _camera_rays, centre_truth, prepare_pass
 from virtus.scene import Scene
 from virtus.transforms import Pose
@@ -347,8 +347,5 @@ def _histogram(mi: Any, dr: Any, keys: Any, active: Any) -> np.ndarray:
 
 def _modules_of(array: Any) -> tuple[Any, Any]:
     """``(mitsuba, drjit)`` of the variant that owns a Dr.Jit array."""
-    import drjit as dr
-
-    variant = "cuda_ad_rgb" if dr.backend_v(array) == dr.JitBackend.CUDA else "llvm_ad_rgb"
-    mi, _, _ = mitsuba(variant)
+    mi, dr, _ = mitsuba(variant_of(array))
     return mi, dr
