@@ -62,6 +62,7 @@ import re
 import time
 import warnings
 from collections.abc import Callable, Iterator
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -288,17 +289,13 @@ def _observe_timed(*arguments: Any) -> tuple[PoseObservation, float]:
 
 
 class _InProcess:
-    """The ``submit``/``result`` of an executor, run at once in this process."""
+    """An executor that runs each submitted call at once, here (``submit`` returns a done
+    :class:`~concurrent.futures.Future`)."""
 
-    class _Done:
-        def __init__(self, value: Any) -> None:
-            self.value = value
-
-        def result(self) -> Any:
-            return self.value
-
-    def submit(self, function: Callable, *arguments: Any) -> _Done:
-        return self._Done(function(*arguments))
+    def submit(self, function: Callable, *arguments: Any) -> Future:
+        future: Future = Future()
+        future.set_result(function(*arguments))
+        return future
 
 
 @contextlib.contextmanager
