@@ -30,7 +30,14 @@ from virtus.devices import Rig
 from virtus.groundtruth import GroundTruth
 from virtus.optics import Intrinsics, ThinLens
 from virtus.render.backend import mitsuba, variant_of
-from virtus.render.tracing import Pass, Trace, _camera_rays, centre_truth, prepare_pass
+from virtus.render.tracing import (
+    Pass,
+    Trace,
+    _camera_rays,
+    _inside,
+    centre_truth,
+    prepare_pass,
+)
 from virtus.scene import Scene
 from virtus.transforms import Pose
 
@@ -234,8 +241,7 @@ def _project_taps(ps: Pass, tap: dict[str, Any]) -> tuple[Any, Any, Any]:
     x, y = projector.distort_xy(mi.Float64(tap["xn"]), mi.Float64(tap["yn"]))
     u = mi.Float(float(projector.fx) * x + float(projector.cx))
     v = mi.Float(float(projector.fy) * y + float(projector.cy))
-    lit = tap["radiance"] > 0
-    lit &= (u >= -0.5) & (u < projector.width - 0.5) & (v >= -0.5) & (v < projector.height - 0.5)
+    lit = (tap["radiance"] > 0) & _inside(u, v, projector)
     return (
         dr.select(lit, tap["radiance"], 0.0),
         dr.select(lit, u, 0.0),

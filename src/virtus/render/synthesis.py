@@ -152,8 +152,10 @@ def emitted_profiles(
     return projector.spread(np.stack(columns, axis=1)).astype(np.float32)
 
 
-def tap_weights(trace: Trace, projector: ProjectorModel, intrinsics: Any | None) -> np.ndarray:
-    """(P, S) float32 tap weights with the projector's fall-off applied."""
+def tap_weights(trace: Any, projector: ProjectorModel, intrinsics: Any | None) -> Any:
+    """Tap weights with the projector's fall-off applied: (P, S) float32 of a host
+    :class:`Trace`, or the Float (P * S,) of a device trace
+    (:class:`virtus.render.device.DeviceTrace`; the fall-off is plain arithmetic)."""
     if projector.falloff == "none":
         return trace.weight
     if intrinsics is None:

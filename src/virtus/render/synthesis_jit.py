@@ -21,7 +21,7 @@ from virtus.errors import InputError
 from virtus.projection import Lookup, ProjectorModel
 from virtus.render.device import DeviceFrames, DeviceTrace
 from virtus.render.sensor_jit import noise_streams
-from virtus.render.synthesis import as_projector, emitted_profiles, projector_groups
+from virtus.render.synthesis import as_projector, emitted_profiles, projector_groups, tap_weights
 from virtus.render.tracing import Trace
 from virtus.sensor import Sensor
 
@@ -58,19 +58,6 @@ def _profile_table(
     return np.concatenate(rows).astype(np.float32), offset, length, axis
 
 
-def _tap_weights(trace: DeviceTrace, projector: ProjectorModel, intrinsics: Any) -> Any:
-    """Float (P * S,) tap weights with the projector's fall-off (as the host's
-    :func:`virtus.render.synthesis.tap_weights`)."""
-    if projector.falloff == "none":
-        return trace.weight
-    if intrinsics is None:
-        raise InputError("projector_intrinsics", "the projector's intrinsics for a fall-off", None)
-    _, dr = trace.modules()
-    weight = trace.weight * projector.falloff_factor(trace.u_p, trace.v_p, intrinsics)
-    dr.eval(weight)
-    return weight
-
-
 def synthesize_on_device(
     trace: DeviceTrace,
     sequence: Any,
@@ -104,7 +91,8 @@ def synthesize_on_device(
     table, offset, length, axis = _profile_table(trace, sequence, projector)
     table_dr, offset_dr = mi.Float(table), mi.UInt32(offset)
     length_dr, axis_dr = mi.Float(length.astype(np.float32)), mi.UInt32(axis)
-    weight = _tap_weights(trace, projector, projector_intrinsics)
+    weight = tap_weights(trace, projector, projector_intrinsics)
+    dr.eval(weight)  # gathered by every lane of the kernel below
     scale = projector.supersampling
     read = Lookup.bilinear if projector.pixel == Lookup.psf else projector.pixel
     integer = mi.UInt8 if sensor.bit_depth == 8 else mi.UInt32
