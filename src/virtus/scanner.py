@@ -142,6 +142,18 @@ class Scanner:
             "aperture_samples": self.aperture_samples,
         }
 
+    def _trace_options(self) -> dict[str, Any]:
+        """The tracing settings every render of this scanner passes on (spp, variant,
+        bounces, lenses, aperture samples)."""
+        return {
+            "spp": self.spp,
+            "variant": self.variant,
+            "bounces": self.bounces,
+            "projector_lens": self.projector_lens,
+            "camera_lens": self.camera_lens,
+            "aperture_samples": self.aperture_samples,
+        }
+
     def decoded_view(
         self,
         scene: Any,
@@ -173,9 +185,7 @@ class Scanner:
 
         rendering = render_device(
             self.rig, scene, self.sequence, projector=self.projector, sensor=self.sensor,
-            seed=as_seed(rng), spp=self.spp, cam2world=cam2world, variant=self.variant,
-            bounces=self.bounces, projector_lens=self.projector_lens,
-            camera_lens=self.camera_lens, aperture_samples=self.aperture_samples,
+            seed=as_seed(rng), cam2world=cam2world, **self._trace_options(),
         )  # fmt: skip
         frames = rendering.frames
         decoded = decode_on_device(
@@ -221,18 +231,13 @@ class Scanner:
             self.rig,
             scene,
             self.sequence,
-            spp=self.spp,
             projector=self.projector,
-            variant=self.variant,
             rng=seed,
             cam2world=pose,
             sensor=self.sensor,
             threads=threads,
             block_pixels=block_pixels,
-            bounces=self.bounces,
-            projector_lens=self.projector_lens,
-            camera_lens=self.camera_lens,
-            aperture_samples=self.aperture_samples,
+            **self._trace_options(),
         )
         return Capture(
             sequence=self.sequence,  # type: ignore[arg-type]
