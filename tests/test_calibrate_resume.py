@@ -278,3 +278,17 @@ def test_observing_in_worker_processes_gives_the_same_files(tmp_path):
     assert workers.rms_px == here.rms_px
     with pytest.raises(InputError, match="processes"):
         calibrate_rig(scanner, processes=99, **options)
+
+
+def test_a_corrupt_pose_file_on_resume_is_one_line_naming_it(rig_file, reference, tmp_path):
+    import shutil
+
+    out = tmp_path / "run"
+    shutil.copytree(reference, out)
+    pose = sorted((out / "poses").glob("*.npz"))[0]
+    pose.write_bytes(b"PK\x03\x04 not a zip archive")
+    result = _run(_command(rig_file, out, "--resume"))
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in result.stderr
+    assert str(pose) in lines[0] and "not a readable pose file" in lines[0]

@@ -273,3 +273,23 @@ def test_unknown_keys_are_refused_with_a_suggestion() -> None:
         safeio.check_keys([1, 2], allowed, "camera")
     assert safeio.check_keys({"K": 1}, allowed, "camera") == {"K": 1}
     assert safeio.closest_key("focal", allowed) is None
+
+
+def test_npz_files_are_read_without_pickles_and_refused_in_one_line(tmp_path):
+    from virtus.errors import VirtusError
+    from virtus.safeio import load_npz
+
+    good = tmp_path / "good.npz"
+    np.savez(good, a=np.arange(3), b=np.eye(2))
+    arrays = load_npz(good, "pose file")
+    assert sorted(arrays) == ["a", "b"]
+    np.testing.assert_array_equal(arrays["b"], np.eye(2))
+    pickled = tmp_path / "pickled.npz"
+    np.savez(pickled, a=np.array([{"x": 1}], dtype=object))
+    garbage = tmp_path / "garbage.npz"
+    garbage.write_bytes(b"not an archive")
+    zip_header = tmp_path / "zip_header.npz"
+    zip_header.write_bytes(b"PK\x03\x04 then nothing of a zip archive")
+    for path in (pickled, garbage, zip_header, tmp_path / "missing.npz"):
+        with pytest.raises(VirtusError, match=r"not a readable pose file"):
+            load_npz(path, "pose file")

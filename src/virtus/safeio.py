@@ -30,6 +30,7 @@ import json
 import math
 import os
 import re
+import zipfile
 from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -481,7 +482,7 @@ def load_npz(path: str | os.PathLike[str], what: str) -> dict[str, np.ndarray]:
     try:
         with np.load(path, allow_pickle=False) as data:
             return {key: data[key] for key in data.files}
-    except (OSError, ValueError, KeyError, EOFError) as error:
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as error:
         raise VirtusError(f"{path}: not a readable {what} ({error})") from None
 
 
