@@ -154,6 +154,33 @@ class Scanner:
             "aperture_samples": self.aperture_samples,
         }
 
+    @property
+    def renders_on_gpu(self) -> bool:
+        """Whether this scanner's Mitsuba variant runs on a GPU (a CUDA variant): there,
+        frames are best kept on the device (:meth:`render_on_device`)."""
+        from virtus.render.backend import choose_variant
+
+        return choose_variant(self.variant).startswith("cuda")
+
+    def render_on_device(
+        self,
+        scene: Any,
+        *,
+        cam2world: Pose | None = None,
+        rng: np.random.Generator | int | None = None,
+    ) -> Any:
+        """Render one pose and keep it on the device that traced it: a
+        :class:`virtus.render.pipeline.DeviceRendering` (frames, taps, ground truth on
+        demand), with :meth:`capture`'s settings and seed: on a GPU the frames are
+        :meth:`capture`'s, on a CPU variant they agree within 1 DN (``render``'s
+        ``synthesis``)."""
+        from virtus.render.pipeline import render_device
+
+        return render_device(
+            self.rig, scene, self.sequence, projector=self.projector, sensor=self.sensor,
+            seed=as_seed(rng), cam2world=cam2world, **self._trace_options(),
+        )  # fmt: skip
+
     def decoded_view(
         self,
         scene: Any,
@@ -170,24 +197,17 @@ class Scanner:
         only the decode and the white frame are copied. Otherwise this is exactly
         ``capture(...).decode()``.
         """
-        from virtus.render.backend import choose_variant
-
         kinds = [frame.kind for frame in self.sequence.frames]  # type: ignore[union-attr]
         white = kinds.index("white") if "white" in kinds else None
         if on_device is None:
-            on_device = choose_variant(self.variant).startswith("cuda")
+            on_device = self.renders_on_gpu
         if not on_device:
             capture = self.capture(scene, cam2world=cam2world, rng=rng, command=[])
             frame = None if white is None else capture.frames[white]
             return DecodedView(capture.decode(), frame)
         from virtus.render.decode_jit import decode_on_device
-        from virtus.render.pipeline import render_device
 
-        rendering = render_device(
-            self.rig, scene, self.sequence, projector=self.projector, sensor=self.sensor,
-            seed=as_seed(rng), cam2world=cam2world, **self._trace_options(),
-        )  # fmt: skip
-        frames = rendering.frames
+        frames = self.render_on_device(scene, cam2world=cam2world, rng=rng).frames
         decoded = decode_on_device(
             frames.data,
             self.sequence,

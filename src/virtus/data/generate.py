@@ -71,6 +71,10 @@ _LABEL_QUEUE = 2
 _SAMPLE_THREADS = 2
 #: In a worker process: the shard buffer kept between tasks (see :func:`_shard_buffer`).
 _IN_WORKER = False
+#: Where samples are labelled: None chooses the device that renders them on GPU variants
+#: and the host otherwise (:func:`_labels_on_device`); True or False forces one (the test
+#: suite checks the device path on the CPU's LLVM variant).
+LABELS_ON_DEVICE: bool | None = None
 _WORKER_BUFFER: tuple[tuple[str, str], dict[str, np.ndarray]] | None = None
 
 
@@ -132,9 +136,10 @@ def _identity(config: DatasetConfig) -> dict[str, Any]:
     }
 
 
-def sample_meta(spec: SampleSpec, capture: Any) -> dict[str, Any]:
+def sample_meta(spec: SampleSpec, render: dict[str, Any]) -> dict[str, Any]:
     """The JSON-ready record of one sample: everything needed to triangulate it again
-    (rig, cam2world, sequence) and to render it again (scanner, seed, objects)."""
+    (rig, cam2world, sequence) and to render it again (scanner, seed, objects);
+    ``render`` is its rendering's ``metadata()``."""
     scanner = spec.scanner
     return {
         "index": spec.index,
@@ -142,14 +147,14 @@ def sample_meta(spec: SampleSpec, capture: Any) -> dict[str, Any]:
         "split": spec.split,
         "seed": spec.capture_seed,
         "n_frames": len(scanner.sequence),
-        "bit_depth": capture.bit_depth,
+        "bit_depth": scanner.sensor.bit_depth,
         "rig": scanner.rig.to_dict(),
         "cam2world": spec.cam2world.to_dict(),
         "sequence": scanner.sequence.to_dict(),
         "sensor": scanner.sensor.to_dict(),
         "projector": scanner.projector.to_dict(),
         "scanner": {"spp": scanner.spp, "bounces": scanner.bounces},
-        "render": capture.render,
+        "render": render,
         "objects": [o.to_dict() for o in spec.objects],
         "info": spec.info,
     }
@@ -179,8 +184,13 @@ def _label(
 ) -> float:
     """Write a sample's arrays into slot ``slot`` of a shard buffer; returns the seconds."""
     begin = time.perf_counter()
-    sample_arrays(capture, spec, store.layout, {name: b[slot] for name, b in buffer.items()})
+    sample_arrays(capture, spec, store.layout, _slot(buffer, slot))
     return time.perf_counter() - begin
+
+
+def _slot(buffer: dict[str, np.ndarray], slot: int) -> dict[str, np.ndarray]:
+    """One sample's arrays (views) in a shard buffer."""
+    return {name: b[slot] for name, b in buffer.items()}
 
 
 def _label_and_encode(
@@ -189,7 +199,51 @@ def _label_and_encode(
     """:func:`_label`, then the sample's checksum and chunks
     (:meth:`~virtus.data.store.DatasetStore.encode_sample`)."""
     seconds = _label(store, spec, capture, buffer, slot)
-    return seconds, store.encode_sample({name: b[slot] for name, b in buffer.items()})
+    return seconds, store.encode_sample(_slot(buffer, slot))
+
+
+def _encode(store: DatasetStore, buffer: dict[str, np.ndarray], slot: int) -> tuple[float, Any]:
+    """:func:`_label_and_encode` of a sample labelled already (on the device)."""
+    return 0.0, store.encode_sample(_slot(buffer, slot))
+
+
+def _labels_on_device(randomiser: Randomiser) -> bool:
+    """Whether samples are labelled on the device that renders them: with a GPU variant
+    (:attr:`virtus.scanner.Scanner.renders_on_gpu`), unless :data:`LABELS_ON_DEVICE`
+    says otherwise."""
+    if LABELS_ON_DEVICE is not None:
+        return LABELS_ON_DEVICE
+    return randomiser.sample(0).scanner.renders_on_gpu
+
+
+def _render_and_label(
+    store: DatasetStore,
+    randomiser: Randomiser,
+    index: int,
+    threads: int | None,
+    buffer: dict[str, np.ndarray],
+    slot: int,
+    on_device: bool,
+) -> tuple[dict[str, Any], float, float]:
+    """Render sample ``index`` and write its arrays into slot ``slot`` of ``buffer``:
+    on the device that renders it (:func:`~virtus.data.labels_jit.device_sample_arrays`)
+    with ``on_device`` (:func:`_labels_on_device`), else on the host. Returns its metadata and the
+    ``render`` and ``labels`` seconds (device work is asynchronous: the labels' seconds
+    include the rendering the host waited for when copying)."""
+    if not on_device:
+        spec, capture, seconds = _render(randomiser, index, threads)
+        labels = _label(store, spec, capture, buffer, slot)
+        return sample_meta(spec, capture.render), seconds, labels
+    from virtus.data.labels_jit import device_sample_arrays
+
+    begin = time.perf_counter()
+    spec = randomiser.sample(index)
+    rendering = spec.scanner.render_on_device(
+        spec.scene, cam2world=spec.cam2world, rng=spec.capture_seed
+    )
+    middle = time.perf_counter()
+    device_sample_arrays(rendering, spec, store.layout, _slot(buffer, slot))
+    return sample_meta(spec, rendering.metadata()), middle - begin, time.perf_counter() - middle
 
 
 def _synthesis_threads(randomiser: Randomiser) -> int | None:
@@ -210,13 +264,16 @@ def _fill_shard(
     (``render``, ``labels``)."""
     start, stop = store.shard_bounds(shard, num_samples)
     threads = _synthesis_threads(randomiser)
+    on_device = _labels_on_device(randomiser)
     timing = {"render": 0.0, "labels": 0.0}
     metas = []
     for slot, index in enumerate(range(start, stop)):
-        spec, capture, seconds = _render(randomiser, index, threads)
-        timing["render"] += seconds
-        timing["labels"] += _label(store, spec, capture, buffer, slot)
-        metas.append(sample_meta(spec, capture))
+        meta, render, labels = _render_and_label(
+            store, randomiser, index, threads, buffer, slot, on_device
+        )
+        timing["render"] += render
+        timing["labels"] += labels
+        metas.append(meta)
         if on_sample is not None:
             on_sample()
     return metas, timing
@@ -323,6 +380,7 @@ def _run_pipelined(
 
     store, randomiser = _open(path, digest)
     threads = _synthesis_threads(randomiser)
+    on_device = _labels_on_device(randomiser)
     buffers: list[dict[str, np.ndarray]] = []
     writes: deque[tuple[Any, int, list[dict[str, Any]], dict[str, float]]] = deque()
     queue: deque[Any] = deque()  # sample futures not yet known to be done
@@ -334,6 +392,7 @@ def _run_pipelined(
         begin = time.perf_counter()
         write, labels = future.result()
         wait, waited = waited + time.perf_counter() - begin, 0.0
+        labels += timing.pop("labels", 0.0)  # labelled on the device, while rendering
         return _result(shard, metas, {**timing, "labels": labels}, write, wait)
 
     with (
@@ -347,16 +406,24 @@ def _run_pipelined(
             while len(writes) >= 2:  # the shard that last used this buffer is written first
                 yield finish()
             start, stop = store.shard_bounds(shard, num)
-            timing = {"render": 0.0}
+            timing = {"render": 0.0, "labels": 0.0}
             metas, labelled = [], []
             for slot, index in enumerate(range(start, stop)):
-                spec, capture, seconds = _render(randomiser, index, threads)
+                if on_device:
+                    meta, seconds, labels = _render_and_label(
+                        store, randomiser, index, threads, buffer, slot, True
+                    )
+                    timing["labels"] += labels
+                    job = labeller.submit(_encode, store, buffer, slot)
+                else:
+                    spec, capture, seconds = _render(randomiser, index, threads)
+                    meta = sample_meta(spec, capture.render)
+                    job = labeller.submit(_label_and_encode, store, spec, capture, buffer, slot)
+                    del spec, capture  # held by the job only
                 timing["render"] += seconds
-                metas.append(sample_meta(spec, capture))
-                job = labeller.submit(_label_and_encode, store, spec, capture, buffer, slot)
+                metas.append(meta)
                 labelled.append(job)
                 queue.append(job)
-                del spec, capture  # held by the job only
                 tick(1)
                 begin = time.perf_counter()
                 while len(queue) > _LABEL_QUEUE:

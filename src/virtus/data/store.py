@@ -33,8 +33,9 @@ into place), then writes the record. A process killed at any moment leaves eithe
 complete, recorded shard or one without a record, which the next run writes again with the
 same bytes (samples are deterministic), so nothing is duplicated or half-written.
 
-**Checksums.** Each sample's checksum (:func:`virtus.data.labels.sample_checksum`) covers
-its arrays as stored; :meth:`DatasetStore.verify` reads every sample back and compares.
+**Checksums.** Each sample's checksum (:func:`virtus.data.labels.sample_checksum`: a CRC-32C
+per array) covers its arrays as stored; :meth:`DatasetStore.verify` reads every sample back,
+compares, and names the arrays that differ.
 """
 
 from __future__ import annotations
@@ -54,7 +55,7 @@ import numpy as np
 
 from virtus import __version__
 from virtus.capture import UNITS as CAPTURE_UNITS
-from virtus.data.labels import ArraySpec, sample_checksum
+from virtus.data.labels import ArraySpec, checksum_mismatches, sample_checksum
 from virtus.data.shards import ShardEncoder
 from virtus.errors import InputError, VirtusError
 from virtus.runs import config_digest, first_difference, write_json_atomic
@@ -519,8 +520,9 @@ class DatasetStore:
                 continue
             for meta, index in zip(metas, indices, strict=True):
                 arrays = {name: block[index - min(indices)] for name, block in blocks.items()}
-                if sample_checksum(arrays, self.layout) != meta.get("checksum"):
-                    report.bad.append((index, "checksum mismatch"))
+                wrong = checksum_mismatches(arrays, self.layout, meta.get("checksum"))
+                if wrong:
+                    report.bad.append((index, f"checksum mismatch ({', '.join(wrong)})"))
                 report.checked += 1
                 done += 1
                 if progress is not None:

@@ -323,7 +323,7 @@ def decode_on_device(
     if not 0.0 <= cut < 1.0:
         raise InputError("min_modulation", "a fraction of full scale in [0, 1)", min_modulation)
     level = None if saturation_level is None else finite("saturation_level", saturation_level)
-    reader = _Reader(mi, dr, frames, pixels, precision)
+    reader = FrameReader(mi, dr, frames, pixels, precision)
     full_scale = _full_scale(reader, full_scale)
     _check_values(reader, full_scale)
     threshold = _threshold(reader, sequence)
@@ -398,7 +398,7 @@ def _backend(frames: Any, variant: str | None) -> tuple[Any, Any, str]:
     return mi, dr, name
 
 
-class _Reader:
+class FrameReader:
     """Gathers frame ``f`` of the flat frame array for every pixel, once per frame.
 
     ``raw(f)`` is the stored type, ``value(f)`` the working float type (``real``),
@@ -450,7 +450,7 @@ class _Reader:
         return mi.UInt32(self.raw(index)) >= dr.opaque(mi.UInt32, math.ceil(level))
 
 
-def _full_scale(reader: _Reader, full_scale: float | None) -> float:
+def _full_scale(reader: FrameReader, full_scale: float | None) -> float:
     if full_scale is not None:
         return positive("full_scale", full_scale)
     if reader.kind == "uint32":
@@ -460,7 +460,7 @@ def _full_scale(reader: _Reader, full_scale: float | None) -> float:
     return 255.0 if reader.kind == "uint8" else 1.0
 
 
-def _check_values(reader: _Reader, full_scale: float) -> None:
+def _check_values(reader: FrameReader, full_scale: float) -> None:
     """Refuse frames above ``full_scale`` (and non-finite float frames), as ``decode`` does:
     one device reduction, skipped where the frame type cannot exceed it."""
     dr = reader.dr
@@ -477,7 +477,7 @@ def _check_values(reader: _Reader, full_scale: float) -> None:
         raise InputError("frames", f"values <= full_scale ({full_scale:g}); pass full_scale", peak)
 
 
-def _threshold(reader: _Reader, sequence: PatternSequence) -> Any | None:
+def _threshold(reader: FrameReader, sequence: PatternSequence) -> Any | None:
     """``(mean white + mean black) / 2`` in float64 (as the host forms it; exact sums of
     integer frames), or None without both kinds of frame."""
     whites = [i for i, f in enumerate(sequence.frames) if f.kind == "white"]
@@ -497,7 +497,7 @@ def _sum(values: Any) -> Any:
 # --- one direction ----------------------------------------------------------------------
 
 
-def _wrapped(reader: _Reader, phase_set: Any) -> tuple[Any, Any, Any]:
+def wrapped_phase_set(reader: FrameReader, phase_set: Any) -> tuple[Any, Any, Any]:
     """Wrapped phase (rad, ``[-pi, pi)``, offset and sign removed), background and
     modulation of one phase set (``PhaseCoding.wrapped`` / ``phase.wrapped_phase``)."""
     dr, real = reader.dr, reader.real
@@ -516,11 +516,11 @@ def _wrapped(reader: _Reader, phase_set: Any) -> tuple[Any, Any, Any]:
     modulation = (2.0 / steps) * dr.sqrt(dr.fma(cosine, cosine, sine * sine))
     coding = phase_set.coding
     if coding.sign != 1 or coding.offset != 0.0:
-        phi = _wrap(dr, coding.sign * phi - coding.offset)
+        phi = wrap_phase(dr, coding.sign * phi - coding.offset)
     return phi, background, modulation
 
 
-def _wrap(dr: Any, value: Any) -> Any:
+def wrap_phase(dr: Any, value: Any) -> Any:
     """``phase.wrap``: to ``[-pi, pi)``, rounding folded back."""
     wrapped = value - TWO_PI * dr.floor((value + math.pi) / TWO_PI)
     wrapped = dr.select(wrapped >= math.pi, wrapped - TWO_PI, wrapped)
@@ -528,7 +528,7 @@ def _wrap(dr: Any, value: Any) -> Any:
 
 
 def _decode_direction(
-    reader: _Reader,
+    reader: FrameReader,
     sequence: PatternSequence,
     direction: str,
     plan: _Plan,
@@ -543,7 +543,7 @@ def _decode_direction(
     wrapped, modulations, backgrounds = [], [], []
     valid = dr.full(mi.Bool, True, reader.pixels)
     for phase_set in plan.sets:
-        phi, background, modulation = _wrapped(reader, phase_set)
+        phi, background, modulation = wrapped_phase_set(reader, phase_set)
         valid = valid & (modulation >= min_level)
         if saturation_level is not None:
             for index in phase_set.indices:
@@ -584,7 +584,7 @@ def _coordinate(sequence: PatternSequence, direction: str, absolute: Any) -> Any
 
 
 def _unwrap_code(
-    reader: _Reader,
+    reader: FrameReader,
     sequence: PatternSequence,
     direction: str,
     plan: _Plan,
@@ -648,7 +648,7 @@ def _in_window(dr: Any, phi: Any, period: float, extent: float) -> Any:
     """``phase.absolute_phase_in_window``: the branch in the window of one period centred
     on the axis."""
     centre = TWO_PI * 0.5 * (extent - 1.0) / period
-    return _wrap(dr, phi - centre) + centre
+    return wrap_phase(dr, phi - centre) + centre
 
 
 def _with_reference(dr: Any, fine: Any, reference: Any, ratio: float) -> tuple[Any, Any]:
@@ -691,7 +691,7 @@ def _unwrap_heterodyne(
         ),
         key=lambda level: -level[0],
     )
-    beats = [(period, _wrap(dr, fine_phase - phases[i])) for period, i in levels]
+    beats = [(period, wrap_phase(dr, fine_phase - phases[i])) for period, i in levels]
     top_period, top_phase = beats[0]
     absolute = _in_window(dr, top_phase, top_period, extent)
     residual = dr.zeros(type(absolute), dr.width(absolute))

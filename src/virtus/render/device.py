@@ -41,7 +41,70 @@ from virtus.render.tracing import (
 from virtus.scene import Scene
 from virtus.transforms import Pose
 
-__all__ = ["DeviceFrames", "DeviceTrace", "trace_device"]
+__all__ = ["DeviceFrames", "DeviceTrace", "DeviceTruth", "trace_device"]
+
+
+@dataclass(frozen=True, eq=False)
+class DeviceTruth:
+    """The pixel-centre ground truth of one pass as device arrays (P = H * W, row-major
+    pixels): what :func:`virtus.render.tracing.centre_truth` computes, left on the device.
+
+    Attributes
+    ----------
+    points : three Float64 (P,) components, camera frame, metres; NaN where nothing is hit.
+    normals : three Float (P,) unit components (float32, Mitsuba's shading normal), camera
+        frame, toward the camera; NaN where nothing is hit.
+    proj_uv : two Float64 (P,) projector pixel coordinates (distortion applied); NaN where
+        nothing is hit or the point is behind the projector.
+    hit, shadow, outside : Bool (P,), as :class:`virtus.groundtruth.GroundTruth`'s masks.
+    """
+
+    points: tuple[Any, Any, Any]
+    normals: tuple[Any, Any, Any]
+    proj_uv: tuple[Any, Any]
+    hit: Any
+    shadow: Any
+    outside: Any
+
+    @property
+    def valid(self) -> Any:
+        """Bool (P,): hit, lit and inside the projector image (``GroundTruth.mask``)."""
+        return self.hit & ~self.shadow & ~self.outside
+
+
+@functools.lru_cache(maxsize=2)
+def _device_centre_directions(variant: str, intrinsics: Intrinsics) -> tuple[Any, Any, Any]:
+    """The pixel-centre ray directions (camera frame) as three device ``Float64`` arrays,
+    uploaded once per camera."""
+    mi, dr, _ = mitsuba(variant)
+    centre, _ = _camera_rays(intrinsics, 1)
+    directions = tuple(mi.Float64(np.ascontiguousarray(centre[:, i])) for i in range(3))
+    dr.eval(*directions)
+    return directions  # type: ignore[return-value]
+
+
+def centre_truth_device(ps: Pass) -> DeviceTruth:
+    """:func:`virtus.render.tracing.centre_truth` kept on the device (same rays, same
+    projector model, float64)."""
+    dr, projector = ps.dr, ps.projector
+    c = ps.tracer.centre_device(
+        list(_device_centre_directions(ps.variant, ps.camera)), ps.rig.cam2proj
+    )
+    x, y = c["xn"], c["yn"]
+    if projector.has_distortion:
+        x, y = projector.distort_xy(x, y)
+    u = float(projector.fx) * x + float(projector.cx)
+    v = float(projector.fy) * y + float(projector.cy)
+    outside = c["hit"] & ~_inside(u, v, projector)
+    dr.eval(u, v, outside)
+    return DeviceTruth(
+        points=(c["px"], c["py"], c["pz"]),
+        normals=(c["nx"], c["ny"], c["nz"]),
+        proj_uv=(u, v),
+        hit=c["hit"],
+        shadow=c["occluded"],
+        outside=outside,
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -56,6 +119,7 @@ class DeviceTrace:
         (P, S) arrays, row-major).
     ambient : Float (P,) ambient radiance, or None where the scene has none.
     truth : computes the pixel-centre ground truth on demand (host arrays).
+    device_truth : computes it on demand as device arrays (:class:`DeviceTruth`).
     """
 
     height: int
@@ -71,6 +135,7 @@ class DeviceTrace:
     bounces: int = 1
     aperture_samples: int = 1
     truth: Callable[[], GroundTruth] | None = None
+    device_truth: Callable[[], DeviceTruth] | None = None
 
     @property
     def n_pixels(self) -> int:
@@ -131,14 +196,23 @@ class DeviceTrace:
         if self.truth is None:
             raise ValueError("this device trace was made without its ground truth")
         truth = self.truth()
+        multibounce = np.asarray(self.multibounce().numpy(), dtype=bool)
+        return dataclasses.replace(
+            truth, mask_multibounce=multibounce.reshape(self.height, self.width)
+        )
+
+    def multibounce(self) -> Any:
+        """Bool (P,): interreflections bring more white-projector radiance than the direct
+        path (``GroundTruth.mask_multibounce``); all False for one bounce."""
+        mi, dr = self.modules()
         if self.bounces == 1:
-            multibounce = np.zeros((self.height, self.width), dtype=bool)
-        else:
-            per_vertex = self.vertex_radiance().numpy().reshape(self.bounces, -1)
-            multibounce = (per_vertex[1:].sum(axis=0) > per_vertex[0]).reshape(
-                self.height, self.width
-            )
-        return dataclasses.replace(truth, mask_multibounce=multibounce)
+            return dr.full(mi.Bool, False, self.n_pixels)
+        per_vertex = self.vertex_radiance()
+        pixel = dr.arange(mi.UInt32, self.n_pixels)
+        indirect = dr.zeros(mi.Float, self.n_pixels)
+        for vertex in range(1, self.bounces):  # vertex order, as the host sums its rows
+            indirect += dr.gather(mi.Float, per_vertex, pixel + vertex * self.n_pixels)
+        return indirect > dr.gather(mi.Float, per_vertex, pixel)
 
     @classmethod
     def from_trace(cls, trace: Trace) -> DeviceTrace:
@@ -310,6 +384,7 @@ def trace_device(
         projector_height=projector.height, weight=weight, u_p=u_p, v_p=v_p, ambient=ambient,
         variant=ps.variant, bounces=ps.bounces, aperture_samples=ps.aperture_samples,
         truth=functools.partial(centre_truth, ps),
+        device_truth=functools.partial(centre_truth_device, ps),
     )  # fmt: skip
 
 

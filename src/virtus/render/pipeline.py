@@ -86,6 +86,25 @@ class Rendering:
             "camera_lens": None if self.camera_lens is None else self.camera_lens.to_dict(),
         }
 
+    @classmethod
+    def settings_of(cls, device: DeviceRendering, frames: Any, gt: Any) -> Rendering:
+        """A rendering with ``device``'s settings and the given frames and ground truth."""
+        return cls(
+            frames=frames,
+            gt=gt,
+            exposure=device.exposure,
+            sensor=device.sensor,
+            seed=device.seed,
+            spp=device.trace.spp,
+            lookup=device.projector.pixel.value,
+            variant=device.trace.variant,
+            projector=device.projector,
+            bounces=device.trace.bounces,
+            aperture_samples=device.trace.aperture_samples,
+            projector_lens=device.projector_lens,
+            camera_lens=device.camera_lens,
+        )
+
 
 @dataclass(frozen=True, eq=False)
 class DeviceRendering:
@@ -111,21 +130,12 @@ class DeviceRendering:
         """The host :class:`Rendering`: frames in one transfer, ground truth computed."""
         gt = self.trace.ground_truth()
         saturated = self.frames.saturated_mask()
-        return Rendering(
-            frames=self.frames.numpy(),
-            gt=dataclasses.replace(gt, mask_saturated=saturated),
-            exposure=self.exposure,
-            sensor=self.sensor,
-            seed=self.seed,
-            spp=self.trace.spp,
-            lookup=self.projector.pixel.value,
-            variant=self.trace.variant,
-            projector=self.projector,
-            bounces=self.trace.bounces,
-            aperture_samples=self.trace.aperture_samples,
-            projector_lens=self.projector_lens,
-            camera_lens=self.camera_lens,
-        )
+        gt = dataclasses.replace(gt, mask_saturated=saturated)
+        return Rendering.settings_of(self, self.frames.numpy(), gt)
+
+    def metadata(self) -> dict[str, Any]:
+        """:meth:`Rendering.metadata` of this rendering (nothing is copied to the host)."""
+        return Rendering.settings_of(self, None, None).metadata()
 
 
 def render_device(

@@ -284,17 +284,24 @@ class _Tracer:
         return self.cam2world @ mi.Ray3f(origin, dr.normalize(focus - origin))
 
     def centre(self, directions: np.ndarray, cam2proj: Pose) -> dict[str, np.ndarray]:
-        """Pixel-centre rays (3, N) float64, camera frame -> ground truth per ray: point
-        (camera frame, float64, NaN where missed), normal toward the camera, hit, shadow,
-        and the point's normalised projector coordinates ``(x/z, y/z)`` (float64, NaN where
-        missed or behind the projector).
+        """:meth:`centre_device` of pixel-centre rays (3, N) float64 (camera frame), copied
+        to the host."""
+        d = [self.mi.Float64(directions[i]) for i in range(3)]
+        out = self.centre_device(d, cam2proj)
+        return {key: value.numpy() for key, value in out.items()}
+
+    def centre_device(self, d: list[Any], cam2proj: Pose) -> dict[str, Any]:
+        """Pixel-centre rays, three ``Float64`` (N,) direction components in the camera
+        frame -> ground truth per ray as evaluated device arrays: point ``px, py, pz``
+        (camera frame, Float64, NaN where missed), normal ``nx, ny, nz`` toward the camera,
+        ``hit``, ``occluded`` (shadow), and the point's normalised projector coordinates
+        ``xn, yn`` (``x/z, y/z``, Float64, NaN where missed or behind the projector).
 
         Points are ``t * d`` in float64 with Mitsuba's (float32) distance ``t``."""
         mi, dr = self.mi, self.dr
-        si = self.mscene.ray_intersect(self._rays(directions.astype(np.float32)))
+        si = self.mscene.ray_intersect(self._rays(mi.Vector3f(*(mi.Float(c) for c in d))))
         hit = si.is_valid()
         occluded = self.mscene.ray_test(si.spawn_ray_to(self.projector), hit)
-        d = [mi.Float64(directions[i]) for i in range(3)]
         t = dr.select(hit, mi.Float64(si.t), dr.nan)
         point = [t * d[i] for i in range(3)]
         # Shading normal, world -> camera frame, turned toward the camera (two-sided).
@@ -318,7 +325,7 @@ class _Tracer:
             "hit": hit, "occluded": occluded & hit,
         }  # fmt: skip
         dr.eval(*out.values())
-        return {key: value.numpy() for key, value in out.items()}
+        return out
 
     def _tap(self, si, bsdf, active, throughput, scale: float, projector: Intrinsics, aperture):  # noqa: ANN001, ANN202
         """One tap of a path vertex: next-event estimation toward the projector centre

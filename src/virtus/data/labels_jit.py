@@ -1,0 +1,179 @@
+"""A sample's arrays made on the device that rendered it: the GPU path of dataset labels.
+
+:func:`device_sample_arrays` is :func:`virtus.data.labels.sample_arrays` for a rendering
+that stayed on the device (:class:`virtus.render.pipeline.DeviceRendering`). The
+pixel-centre ground truth (:class:`virtus.render.device.DeviceTruth`), the phase labels,
+the modulation, the masks and the object ids are computed where the frames are, in the
+store's precision, and each array crosses to the host once, in its stored dtype, straight
+into its slot of the shard buffer. On a GPU this takes the labels (about 0.2 CPU-seconds of
+a 960 x 960 sample) and the float64 ground-truth copies off the host, whose cores are left
+to checksum and compress.
+
+The formulas are the host's, shared where they are not numpy-specific
+(:func:`virtus.data.labels.surface_distance`, the decoder's
+:func:`virtus.render.decode_jit.wrapped_phase_set` and
+:func:`~virtus.render.decode_jit.wrap_phase`). On ``llvm_ad_rgb`` the same code runs on the
+CPU, which is how the test suite checks it against :func:`sample_arrays`: masks, fringe
+orders and object ids are equal, the float64 phase and geometry labels agree to the
+stored precision, and the float32 modulation, numerator and denominator to float32
+rounding (the device's ``sin``, ``cos`` and fused multiply-adds are not numpy's).
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+
+from virtus import phase as _phase
+from virtus.data.labels import (
+    DIRECTION_LABELS,
+    DIRECTIONS,
+    MASKS,
+    OBJECT_TOLERANCE_M,
+    ArrayOps,
+    ArraySpec,
+    _finest_phase_frames,
+    surface_distance,
+)
+from virtus.data.sampling import SampleSpec
+from virtus.errors import VirtusError
+from virtus.render.decode_jit import FrameReader, wrap_phase, wrapped_phase_set
+
+__all__ = ["device_sample_arrays"]
+
+
+def device_sample_arrays(
+    rendering: Any,
+    spec: SampleSpec,
+    layout: tuple[ArraySpec, ...],
+    out: dict[str, np.ndarray] | None = None,
+) -> dict[str, np.ndarray]:
+    """Every array of one sample (:mod:`virtus.data.labels`), computed on the device.
+
+    Parameters
+    ----------
+    rendering : the sample's :class:`~virtus.render.pipeline.DeviceRendering` (traced with
+        its ground truth: ``render_device`` keeps it).
+    spec : its specification (scanner, objects, cam2world).
+    layout : the store's arrays (:func:`virtus.data.labels.array_layout`).
+    out : name -> writable host array of the layout's per-sample shape and dtype (e.g. one
+        sample's slot of a shard buffer); every element is written. Default: new arrays.
+
+    Returns
+    -------
+    ``out``.
+    """
+    trace, frames = rendering.trace, rendering.frames
+    if trace.device_truth is None:
+        raise VirtusError("device_sample_arrays needs a device trace with its ground truth")
+    specs = {array.name: array for array in layout}
+    if out is None:
+        out = {a.name: np.empty(a.shape, dtype=a.dtype) for a in layout}
+    mi, dr = trace.modules()
+    real = mi.Float if specs["depth"].dtype == "float32" else mi.Float64
+    truth = trace.device_truth()
+    pixels = trace.n_pixels
+    reader = FrameReader(mi, dr, frames.data, pixels, specs["depth"].dtype)
+
+    frames_out = out["frames"]
+    frames_out[: frames.n_frames] = frames.numpy()
+    frames_out[frames.n_frames :] = 0
+
+    saturated = dr.full(mi.Bool, False, pixels)
+    for index in range(frames.n_frames):  # some frame at full scale (as the host's max)
+        saturated |= reader.at_least(index, rendering.sensor.full_scale)
+    planes = {
+        "valid": truth.valid, "hit": truth.hit, "shadow": truth.shadow,
+        "outside": truth.outside, "multibounce": trace.multibounce(), "saturated": saturated,
+    }  # fmt: skip
+    _copy(mi, dr, mi.Bool, [planes[name] for name in MASKS], out["masks"], stacked=True)
+
+    _copy(mi, dr, real, [truth.points[2]], out["depth"])
+    _copy(mi, dr, real, list(truth.points), out["points"])
+    _copy(mi, dr, real, list(truth.normals), out["normals"])
+    _copy(mi, dr, real, list(truth.proj_uv), out["proj_uv"])
+
+    sequence = spec.scanner.sequence
+    for name in DIRECTION_LABELS:
+        out[name].fill(specs[name].fill)
+    for direction in sequence.directions:
+        labels = _direction_labels(mi, dr, real, reader, sequence, truth, direction)
+        channel = DIRECTIONS.index(direction)
+        for name in DIRECTION_LABELS:
+            kind = mi.Int32 if name == "order" else real
+            _copy(mi, dr, kind, [labels[name]], out[name][channel])
+
+    _copy(mi, dr, mi.UInt32, [_object_ids(mi, dr, spec, truth)], out["object_id"])
+    return out
+
+
+def _copy(mi: Any, dr: Any, kind: Any, components: list[Any], target: np.ndarray, *,
+          stacked: bool = False) -> None:  # fmt: skip
+    """Copy device arrays (P,) into a host array in one transfer: ``components`` are the
+    last axis of ``target`` (``(H, W, k)``), or its first with ``stacked`` (``(k, H, W)``),
+    converted to ``kind`` on the device."""
+    count, pixels = len(components), dr.width(components[0])
+    if count == 1:
+        flat = kind(components[0])
+    else:
+        flat = dr.zeros(kind, count * pixels)
+        index = dr.arange(mi.UInt32, pixels)
+        for k, component in enumerate(components):
+            where = index + k * pixels if stacked else index * count + k
+            dr.scatter(flat, kind(component), where)
+    host = np.asarray(flat.numpy())
+    np.copyto(target, host.reshape(target.shape), casting="unsafe")  # uint32 ids -> uint16
+
+
+def _direction_labels(
+    mi: Any, dr: Any, real: Any, reader: FrameReader, sequence: Any, truth: Any, direction: str
+) -> dict[str, Any]:
+    """The :data:`DIRECTION_LABELS` of one direction as device arrays (as the host's
+    ``_direction_labels``: phase, wrap and order in float64, the rest in ``real``)."""
+    period = sequence.periods(direction)[0]
+    scale = sequence.axis_scale(direction)
+    indices, coding = _finest_phase_frames(sequence, direction)
+    valid = truth.valid
+    pattern = scale * truth.proj_uv[0 if direction == "v" else 1]  # pattern units
+    absolute = pattern * (_phase.TWO_PI / period)  # phase.coordinate_to_phase
+    wrapped = wrap_phase(dr, absolute)
+    order = dr.round((absolute - wrapped) / _phase.TWO_PI)
+    nan = float("nan")
+    wrapped_out = dr.select(valid, real(wrapped), nan)
+    _, _, modulation = wrapped_phase_set(reader, SimpleNamespace(indices=indices, coding=coding))
+    amplitude = (0.5 * coding.steps) * real(modulation)
+    return {
+        "phase": dr.select(valid, real(absolute), nan),
+        "wrapped": wrapped_out,
+        "order": dr.select(valid, mi.Int32(order), -1),
+        "numerator": amplitude * dr.sin(wrapped_out),
+        "denominator": amplitude * dr.cos(wrapped_out),
+        "modulation": real(modulation),
+    }
+
+
+def _object_ids(mi: Any, dr: Any, spec: SampleSpec, truth: Any) -> Any:
+    """UInt32 (P,) object id of each pixel's surface point, 0 for none (as
+    :func:`virtus.data.labels.object_ids`: the nearest surface, the first on a tie)."""
+    pixels = dr.width(truth.hit)
+    ids = dr.zeros(mi.UInt32, pixels)
+    if not spec.objects:
+        return ids
+    ops = ArrayOps.of(dr)
+    x, y, z = truth.points
+    nearest = None
+    for record in spec.objects:
+        pose = record.pose.inverse() @ spec.cam2world  # camera frame -> object frame
+        R, t = pose.R, pose.t  # noqa: N806
+        local = [x * float(R[i, 0]) + y * float(R[i, 1]) + z * float(R[i, 2]) + float(t[i])
+                 for i in range(3)]  # fmt: skip
+        distance = surface_distance(record, *local, ops)
+        if nearest is None:
+            nearest, ids = distance, dr.full(mi.UInt32, record.id, pixels)
+            continue
+        closer = distance < nearest
+        ids = dr.select(closer, record.id, ids)
+        nearest = dr.select(closer, distance, nearest)
+    return dr.select(truth.hit & (nearest <= OBJECT_TOLERANCE_M), ids, 0)
