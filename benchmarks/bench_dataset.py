@@ -6,7 +6,9 @@ before a plane) with :func:`virtus.data.generate`, once per ``--workers`` value 
 ``--workers 1 2``), and reports in one run:
 
 * images/s written (frames of all samples / wall time of the generation), samples/s, the
-  bytes on disk, and the load average before and after each generation;
+  bytes on disk, the CPU seconds a sample (this process and its workers: on a GPU host the
+  cores, not the GPU, bound the rate), and the load average before and after each
+  generation;
 * the per-stage split (:data:`virtus.data.generate.TIMING_KEYS`), seconds summed over the
   samples: render (trace + synthesis of every frame), labels (ground truth -> phase, order,
   numerator/denominator, modulation, masks, object ids), checksum (SHA-256 of every stored
@@ -73,6 +75,17 @@ def config_file(folder: Path, samples: int, shard: int, codec: str, level: int, 
     return path
 
 
+def cpu_seconds() -> float:
+    """CPU seconds (user + system) used so far by this process and its finished workers."""
+    import resource
+
+    total = 0.0
+    for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN):
+        usage = resource.getrusage(who)
+        total += usage.ru_utime + usage.ru_stime
+    return total
+
+
 def load() -> float:
     """The 1-minute load average."""
     return round(os.getloadavg()[0], 2)
@@ -134,7 +147,9 @@ def run(config, folder: Path, samples: int, workers: int, frames_per_sample: int
     """One generation into a new store: rate, stage seconds, bytes."""
     store_path = folder / f"store_w{workers}"
     load_before = load()
+    cpu_before = cpu_seconds()
     report = generate(config, store_path, workers=workers)
+    cpu = cpu_seconds() - cpu_before
     load_after = load()
     store = DatasetStore.open(store_path)
     stages = {key: round(report.timing_s.get(key, 0.0), 3) for key in TIMING_KEYS}
@@ -145,6 +160,7 @@ def run(config, folder: Path, samples: int, workers: int, frames_per_sample: int
         "images_per_s": round(samples * frames_per_sample / report.seconds, 2),
         "samples_per_s": round(samples / report.seconds, 3),
         "seconds": round(report.seconds, 3),
+        "cpu_s_per_sample": round(cpu / samples, 3),
         "stage_s": stages,
         "stage_s_per_sample": {k: round(v / samples, 3) for k, v in stages.items()},
         "bytes_raw": samples * sum(a.nbytes for a in store.layout),
@@ -168,7 +184,8 @@ def summary(result: dict) -> str:
         lines.append(
             f"workers {entry['workers']}: {entry['images_per_s']:.1f} images/s "
             f"({entry['seconds']:.2f} s; load {entry['load_average_before']} -> "
-            f"{entry['load_average_after']}); stage seconds: {split}; "
+            f"{entry['load_average_after']}; {entry['cpu_s_per_sample']:.2f} CPU-s a sample); "
+            f"stage seconds: {split}; "
             f"{entry['bytes_on_disk'] / 1e6:.0f} MB on disk of {entry['bytes_raw'] / 1e6:.0f} MB"
         )
     for row in result.get("codecs", []):
