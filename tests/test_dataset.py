@@ -401,6 +401,34 @@ def test_verify_finds_corruption_and_missing_samples(tmp_path, capsys) -> None:
     assert {index for index, _ in report["bad"]} <= {4, 5, 6, 7} and report["bad"]
 
 
+def test_checksums_name_the_bad_array_and_old_sha256_stores_still_verify(tmp_path) -> None:
+    from virtus.data.labels import _sha256_checksum, checksum_mismatches, sample_checksum
+
+    path = tmp_path / "store"
+    generate(load_config(tiny_config(tmp_path)), path, num=4)
+    store = DatasetStore.open(path)
+    record_path = path / "manifest" / "shard_000000.json"
+    record = json.loads(record_path.read_text())
+    arrays = store.read_sample(1)
+    checksum = record["samples"][1]["checksum"]
+    assert checksum == sample_checksum(arrays, store.layout) and checksum.startswith("crc32c:")
+    # A changed value is caught in its own array, and only there.
+    changed = {name: value.copy() for name, value in arrays.items()}
+    changed["order"][1, 5, 7] += 1
+    assert checksum_mismatches(changed, store.layout, checksum) == ["order"]
+    assert checksum_mismatches(arrays, store.layout, "md5:0123") == ["sample"]
+    assert checksum_mismatches(arrays, store.layout, "crc32c:00000000") == ["sample"]
+
+    parts = checksum.split(".")
+    depth = [a.name for a in store.layout].index("depth")
+    parts[depth] = parts[depth][:-1] + ("0" if parts[depth][-1] != "0" else "1")
+    record["samples"][1]["checksum"] = ".".join(parts)
+    record["samples"][2]["checksum"] = _sha256_checksum(store.read_sample(2), store.layout)
+    record_path.write_text(json.dumps(record))
+    report = DatasetStore.open(path).verify()
+    assert report.checked == 4 and report.bad == [(1, "checksum mismatch (depth)")]
+
+
 # -- loaders and exports --------------------------------------------------------------------
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import errno
 import json
 import os
+from pathlib import Path
 
 import pytest
 
@@ -242,3 +243,26 @@ def test_a_staging_directory_removed_by_another_writer_is_made_again(tmp_path):
     assert len(calls) == 2
     assert (tmp_path / "a.json").read_text() == "{}"
     assert not (tmp_path / TMP_DIR).exists()
+
+
+def test_a_staging_directory_removed_while_mkdir_checks_it_is_made_again(tmp_path, monkeypatch):
+    # mkdir found the directory (another writer's), which was removed before mkdir checked
+    # that it is a directory: Path.mkdir raises FileExistsError for a path that is gone.
+    real_mkdir = Path.mkdir
+    raced = []
+
+    def mkdir(self, *args, **kwargs):
+        if self.name == TMP_DIR and not raced:
+            raced.append(self)
+            raise FileExistsError(17, "File exists", str(self))
+        return real_mkdir(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "mkdir", mkdir)
+    atomic_write(tmp_path / "a.json", lambda tmp: tmp.write_text("{}"))
+    assert raced and (tmp_path / "a.json").read_text() == "{}"
+    # A file (not a directory) in the staging directory's place is an error, not a retry.
+    monkeypatch.setattr(Path, "mkdir", real_mkdir)
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / TMP_DIR).write_text("not a directory")
+    with pytest.raises(FileExistsError):
+        atomic_write(tmp_path / "sub" / "b.json", lambda tmp: tmp.write_text("{}"))

@@ -62,7 +62,7 @@ RUN_FORMAT = "virtus.run/1"
 #: Staging directory (beside the targets) of the files :func:`atomic_write_files` writes.
 TMP_DIR = ".virtus-tmp"
 #: Times a write is retried when another writer removed the shared staging directory.
-_STAGING_ATTEMPTS = 5
+_STAGING_ATTEMPTS = 20
 #: Keys of ``run.json`` that must match for a run to be resumed.
 _IDENTITY = ("command", "virtus_version", "config", "inputs")
 
@@ -126,15 +126,22 @@ def atomic_write_files(
 def _write_staged(staging: Path, write: Callable[[Path], object]) -> None:
     """``write(staging)`` into a staging directory that other writers share: one that
     finishes removes it when it is empty, which can happen between this writer's ``mkdir``
-    and its first file (seen with 12 dataset workers); then it is made again and the
-    write retried (nothing of this writer's was in it yet)."""
+    and its first file (seen with 12 dataset workers), or inside ``mkdir`` itself, between
+    finding the directory there and checking that it is one (seen with 16); then it is made
+    again and the write retried (nothing of this writer's was in it yet)."""
     for attempt in range(_STAGING_ATTEMPTS):
-        staging.mkdir(parents=True, exist_ok=True)
+        last = attempt + 1 == _STAGING_ATTEMPTS
+        try:
+            staging.mkdir(parents=True, exist_ok=True)
+        except FileExistsError:  # there, then removed before mkdir's is_dir check
+            if staging.exists() or last:
+                raise
+            continue
         try:
             write(staging)
             return
         except FileNotFoundError:
-            if staging.is_dir() or attempt + 1 == _STAGING_ATTEMPTS:
+            if staging.is_dir() or last:
                 raise
 
 

@@ -40,6 +40,7 @@ from virtus.data.labels import (
 from virtus.data.sampling import SampleSpec
 from virtus.errors import VirtusError
 from virtus.render.decode_jit import FrameReader, wrap_phase, wrapped_phase_set
+from virtus.render.device import to_host
 
 __all__ = ["device_sample_arrays"]
 
@@ -88,12 +89,12 @@ def device_sample_arrays(
         "valid": truth.valid, "hit": truth.hit, "shadow": truth.shadow,
         "outside": truth.outside, "multibounce": trace.multibounce(), "saturated": saturated,
     }  # fmt: skip
-    _copy(mi, dr, mi.Bool, [planes[name] for name in MASKS], out["masks"], stacked=True)
+    _copy(mi.Bool, [planes[name] for name in MASKS], out["masks"], stacked=True)
 
-    _copy(mi, dr, real, [truth.points[2]], out["depth"])
-    _copy(mi, dr, real, list(truth.points), out["points"])
-    _copy(mi, dr, real, list(truth.normals), out["normals"])
-    _copy(mi, dr, real, list(truth.proj_uv), out["proj_uv"])
+    _copy(real, [truth.points[2]], out["depth"])
+    _copy(real, list(truth.points), out["points"])
+    _copy(real, list(truth.normals), out["normals"])
+    _copy(real, list(truth.proj_uv), out["proj_uv"])
 
     sequence = spec.scanner.sequence
     for name in DIRECTION_LABELS:
@@ -103,27 +104,17 @@ def device_sample_arrays(
         channel = DIRECTIONS.index(direction)
         for name in DIRECTION_LABELS:
             kind = mi.Int32 if name == "order" else real
-            _copy(mi, dr, kind, [labels[name]], out[name][channel])
+            _copy(kind, [labels[name]], out[name][channel])
 
-    _copy(mi, dr, mi.UInt32, [_object_ids(mi, dr, spec, truth)], out["object_id"])
+    _copy(mi.UInt32, [_object_ids(mi, dr, spec, truth)], out["object_id"])
     return out
 
 
-def _copy(mi: Any, dr: Any, kind: Any, components: list[Any], target: np.ndarray, *,
-          stacked: bool = False) -> None:  # fmt: skip
+def _copy(kind: Any, components: list[Any], target: np.ndarray, *, stacked: bool = False) -> None:
     """Copy device arrays (P,) into a host array in one transfer: ``components`` are the
     last axis of ``target`` (``(H, W, k)``), or its first with ``stacked`` (``(k, H, W)``),
     converted to ``kind`` on the device."""
-    count, pixels = len(components), dr.width(components[0])
-    if count == 1:
-        flat = kind(components[0])
-    else:
-        flat = dr.zeros(kind, count * pixels)
-        index = dr.arange(mi.UInt32, pixels)
-        for k, component in enumerate(components):
-            where = index + k * pixels if stacked else index * count + k
-            dr.scatter(flat, kind(component), where)
-    host = np.asarray(flat.numpy())
+    host = to_host(components, kind, stacked=stacked)
     np.copyto(target, host.reshape(target.shape), casting="unsafe")  # uint32 ids -> uint16
 
 

@@ -35,13 +35,12 @@ from virtus.render.tracing import (
     Trace,
     _camera_rays,
     _inside,
-    centre_truth,
     prepare_pass,
 )
 from virtus.scene import Scene
 from virtus.transforms import Pose
 
-__all__ = ["DeviceFrames", "DeviceTrace", "DeviceTruth", "trace_device"]
+__all__ = ["DeviceFrames", "DeviceTrace", "DeviceTruth", "to_host", "trace_device"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,6 +69,41 @@ class DeviceTruth:
     def valid(self) -> Any:
         """Bool (P,): hit, lit and inside the projector image (``GroundTruth.mask``)."""
         return self.hit & ~self.shadow & ~self.outside
+
+    def to_host(self, height: int, width: int, multibounce: Any) -> GroundTruth:
+        """The host :class:`~virtus.groundtruth.GroundTruth` (float64, one transfer per
+        array), ``mask_multibounce`` from ``multibounce`` (Bool (P,))."""
+        mi, _ = _modules_of(self.hit)
+        image = (height, width)
+        points = to_host(list(self.points), mi.Float64).reshape(*image, 3)
+        masks = to_host([self.hit, self.shadow, self.outside, multibounce], mi.Bool, stacked=True)
+        hit, shadow, outside, multi = masks.reshape(4, *image)
+        return GroundTruth(
+            depth=points[..., 2],
+            points=points,
+            normals=to_host(list(self.normals), mi.Float64).reshape(*image, 3),
+            proj_uv=to_host(list(self.proj_uv), mi.Float64).reshape(*image, 2),
+            mask_hit=hit,
+            mask_shadow=shadow,
+            mask_outside=outside,
+            mask_multibounce=multi,
+        )
+
+
+def to_host(components: list[Any], kind: Any, *, stacked: bool = False) -> np.ndarray:
+    """Device arrays (P,) each, converted to ``kind`` on the device, as one flat host array
+    from one transfer: pixel-major ``(P, k)`` (components interleaved), or with ``stacked``
+    component-major ``(k, P)``."""
+    mi, dr = _modules_of(components[0])
+    count, pixels = len(components), dr.width(components[0])
+    if count == 1:
+        flat = kind(components[0])
+    else:
+        flat = dr.zeros(kind, count * pixels)
+        index = dr.arange(mi.UInt32, pixels)
+        for k, component in enumerate(components):
+            dr.scatter(flat, kind(component), index + k * pixels if stacked else index * count + k)
+    return np.asarray(flat.numpy())
 
 
 @functools.lru_cache(maxsize=2)
@@ -118,8 +152,9 @@ class DeviceTrace:
     weight, u_p, v_p : Float (P * S,) tap weights and projector coordinates (Trace's
         (P, S) arrays, row-major).
     ambient : Float (P,) ambient radiance, or None where the scene has none.
-    truth : computes the pixel-centre ground truth on demand (host arrays).
-    device_truth : computes it on demand as device arrays (:class:`DeviceTruth`).
+    truth : gives the pixel-centre ground truth on the host (an uploaded :class:`Trace`'s).
+    device_truth : computes it on demand as device arrays (:class:`DeviceTruth`; a traced
+        pass's).
     """
 
     height: int
@@ -192,13 +227,15 @@ class DeviceTrace:
         return out
 
     def ground_truth(self) -> GroundTruth:
-        """Pixel-centre ground truth on the host, with ``mask_multibounce`` from the taps."""
+        """Pixel-centre ground truth on the host, with ``mask_multibounce`` from the taps
+        (a traced pass computes it on the device and copies each array once)."""
+        if self.device_truth is not None:
+            return self.device_truth().to_host(self.height, self.width, self.multibounce())
         if self.truth is None:
             raise ValueError("this device trace was made without its ground truth")
-        truth = self.truth()
         multibounce = np.asarray(self.multibounce().numpy(), dtype=bool)
         return dataclasses.replace(
-            truth, mask_multibounce=multibounce.reshape(self.height, self.width)
+            self.truth(), mask_multibounce=multibounce.reshape(self.height, self.width)
         )
 
     def multibounce(self) -> Any:
@@ -383,7 +420,6 @@ def trace_device(
         height=ps.height, width=ps.width, spp=ps.spp, projector_width=projector.width,
         projector_height=projector.height, weight=weight, u_p=u_p, v_p=v_p, ambient=ambient,
         variant=ps.variant, bounces=ps.bounces, aperture_samples=ps.aperture_samples,
-        truth=functools.partial(centre_truth, ps),
         device_truth=functools.partial(centre_truth_device, ps),
     )  # fmt: skip
 
