@@ -146,6 +146,26 @@ def test_real_path_equals_virtual_path(tmp_path):
     np.testing.assert_array_equal(again.rig.camera.intrinsics.K, virtual.rig.camera.intrinsics.K)
 
 
+def test_captures_observed_in_worker_processes_give_the_same_files(tmp_path):
+    rig = scaled_rig(0.25)
+    scanner = Scanner(rig=rig, spp=1)
+    board, seed = board_from_spec("4x7"), 2
+    texture = board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=BOARD_BLUR_M)
+    poses = pose_set("random:5", rig, board, np.random.default_rng(seed))
+    for index, pose in enumerate(poses):
+        capture = scanner.capture(board_scene(board, pose, texture), rng=pose_seed(seed, index))
+        capture.save(tmp_path / "captures" / pose.name)
+    results = {}
+    for processes in (0, 2):
+        out = tmp_path / f"out_{processes}"
+        results[processes] = calibrate_captures(
+            [tmp_path / "captures"], board=board, out_dir=out, processes=processes
+        )
+    assert results[0].rms_px == results[2].rms_px
+    for name in ["calibration.json", *(f"poses/{pose.name}.npz" for pose in poses)]:
+        assert (tmp_path / "out_0" / name).read_bytes() == (tmp_path / "out_2" / name).read_bytes()
+
+
 @pytest.mark.slow
 def test_checkerboard_calibration_recovers_the_rig():
     rig = scaled_rig(0.5)

@@ -776,6 +776,7 @@ def calibrate_captures(
     overwrite: bool = False,
     fix_intrinsics: bool = False,
     progress: Progress | None = None,
+    processes: int | None = None,
 ) -> CalibrationResult:
     """Calibrate a rig from captures of a board, one capture of the whole sequence per pose.
 
@@ -798,6 +799,9 @@ def calibrate_captures(
     overwrite : remove an earlier run's files in ``out_dir`` first.
     fix_intrinsics : keep single-device intrinsics in the stereo step.
     progress : called after each pose as ``progress(done, total, name)``.
+    processes : worker processes that read, decode and observe the poses side by side
+        (default :func:`observe_processes`; 0: one after the other, here). The files and the
+        result do not depend on it.
 
     Returns
     -------
@@ -838,8 +842,9 @@ def calibrate_captures(
         "sequence": loaded[0].sequence.to_dict(),
         "fix_intrinsics": bool(fix_intrinsics),
     }
+    workers = observe_processes() if processes is None else processes
     if out_dir is None:
-        return _run_captures(loaded, names, board, episode, progress, None)
+        return _run_captures(loaded, names, board, episode, progress, None, workers)
     inputs = {
         f"capture {name}": Path(path) / "capture.json"
         for name, path in zip(names, paths, strict=True)
@@ -853,7 +858,26 @@ def calibrate_captures(
         layout=CAPTURES_LAYOUT,
         overwrite=overwrite,
     ) as run:
-        return _run_captures(loaded, names, board, episode, progress, run)
+        return _run_captures(loaded, names, board, episode, progress, run, workers)
+
+
+def _record_observed(run: RunDirectory | None, name: str, obs: PoseObservation) -> None:
+    """Write a captured pose's observation (``poses/<name>.npz``) and log it."""
+    if run is None:
+        return
+    arrays = {
+        key: value
+        for key, value in (("cam_centroids", obs.cam_centroids), ("homographies", obs.homographies))
+        if value is not None
+    }
+    run.write(f"{POSE_DIR}/{name}.npz", partial(_save_arrays, arrays=arrays))
+    run.log(f"observed {name}")
+
+
+def _observe_capture_timed(capture: Capture, board: Board, name: str) -> tuple[Any, float]:
+    """:func:`observe_pose` (frames read and decoded too) and the seconds it took."""
+    start = time.perf_counter()
+    return observe_pose(capture, board, name), time.perf_counter() - start
 
 
 def _run_captures(
@@ -863,30 +887,28 @@ def _run_captures(
     episode: dict[str, Any],
     progress: Progress | None,
     run: RunDirectory | None,
+    workers: int,
 ) -> CalibrationResult:
     timing = {"render_s": 0.0, "observe_s": 0.0, "calibrate_s": 0.0}
     if run is not None:
         run.own(EPISODE_FILE, *(f"{POSE_DIR}/{n}.npz" for n in names), *RESULT_FILES, TIMING_FILE)
         run.write_json(EPISODE_FILE, episode)
     observations = []
-    for index, (capture, name) in enumerate(zip(captures, names, strict=True)):
-        start = time.perf_counter()
-        obs = observe_pose(capture, board, name)
-        timing["observe_s"] += time.perf_counter() - start
-        observations.append(obs)
-        if run is not None:
-            arrays = {
-                key: value
-                for key, value in (
-                    ("cam_centroids", obs.cam_centroids),
-                    ("homographies", obs.homographies),
-                )
-                if value is not None
-            }
-            run.write(f"{POSE_DIR}/{name}.npz", partial(_save_arrays, arrays=arrays))
-            run.log(f"observed {name}")
-        if progress is not None:
-            progress(index + 1, len(captures), name)
+    with _observer_pool(workers) as pool:
+        # Poses are observed side by side, at most two per worker in flight (each holds its
+        # frames), and taken in pose order: the files and log are a sequential run's.
+        in_flight = max(1, 2 * workers)
+        jobs: collections.deque = collections.deque()
+        for index, name in enumerate(names):
+            while len(jobs) < in_flight and index + len(jobs) < len(names):
+                k = index + len(jobs)
+                jobs.append(pool.submit(_observe_capture_timed, captures[k], board, names[k]))
+            obs, seconds = jobs.popleft().result()
+            timing["observe_s"] += seconds
+            observations.append(obs)
+            _record_observed(run, name, obs)
+            if progress is not None:
+                progress(index + 1, len(captures), name)
     start = time.perf_counter()
     with _opencv_single_thread():
         solved = calibrate_observations(
