@@ -71,6 +71,29 @@ def _start(command: list[str]) -> subprocess.Popen:
     )
 
 
+#: ``python -c`` program: the CLI (arguments after the marker path) with the solve paused:
+#: it touches the marker, then waits, so a test can kill the run during the solve without
+#: racing its last steps (which take ~0.2 s and may be over before a busy machine polls).
+_PAUSED_SOLVE = """
+import pathlib, sys, time
+import virtus.pipeline.calibrate as job
+solve = job._solve
+def paused(*args, **kwargs):
+    pathlib.Path(sys.argv[1]).touch()
+    time.sleep(120)
+    return solve(*args, **kwargs)
+job._solve = paused
+from virtus.cli import main
+main(sys.argv[2:])
+"""
+
+
+def _paused_before_solve(command: list[str], marker: Path) -> list[str]:
+    """``command`` (a ``python -m virtus ...`` list) run with :data:`_PAUSED_SOLVE`."""
+    assert command[1:3] == ["-m", "virtus"]
+    return [command[0], "-c", _PAUSED_SOLVE, str(marker), *command[3:]]
+
+
 def _run(command: list[str]) -> subprocess.CompletedProcess:
     return subprocess.run(command, capture_output=True, text=True, timeout=120)
 
@@ -137,11 +160,17 @@ def test_two_identical_runs_are_byte_identical(rig_file, reference, tmp_path):
 def test_killed_run_resumes_to_the_same_bytes_without_rendering_twice(
     rig_file, reference, tmp_path, finished
 ):
-    """SIGKILL once ``finished`` pose files exist (all of them: during the solve and the
-    result's writes), then ``--resume``."""
-    process = _start(_command(rig_file, tmp_path))
+    """SIGKILL once ``finished`` pose files exist (all of them: during the solve, which
+    the run pauses in until it is killed), then ``--resume``."""
+    marker = tmp_path.parent / f"{tmp_path.name}.solving"
+    command = _command(rig_file, tmp_path)
+    if finished == N_POSES:
+        command = _paused_before_solve(command, marker)
+    process = _start(command)
     deadline = time.monotonic() + 120
-    while len(list((tmp_path / "poses").glob("*.npz"))) < finished:
+    while len(list((tmp_path / "poses").glob("*.npz"))) < finished or (
+        finished == N_POSES and not marker.exists()
+    ):
         assert process.poll() is None, process.stderr.read()
         assert time.monotonic() < deadline
         time.sleep(POLL_S)
