@@ -68,7 +68,7 @@ def projected(sequence: PatternSequence, u, v, a, b) -> np.ndarray:
 
 def code_edges(sequence: PatternSequence, direction: str) -> np.ndarray:
     """Projector coordinates (px) where a direction's code changes: pixel boundaries."""
-    plan = sequence._plans[direction]
+    plan = sequence.plans()[direction]
     code = plan.code.coding
     pixels = np.arange(sequence.span(direction), dtype=np.float64)
     order = code.half_index(pixels * sequence.axis_scale(direction)) >> 1
@@ -88,7 +88,7 @@ def round_trip(sequence: PatternSequence, rng, count=6000, band=0.0):
     if band:
         keep = np.ones(u.size, dtype=bool)
         for direction, x in (("v", u), ("h", v)):
-            plan = sequence._plans[direction]
+            plan = sequence.plans()[direction]
             if plan.code is not None and not plan.code.coding.complement:
                 edges = code_edges(sequence, direction)
                 nearest = np.min(np.abs(x[:, None] - edges[None, :]), axis=1)
@@ -137,7 +137,7 @@ CASES = {
 def test_every_coding_round_trips_without_order_errors(name: str) -> None:
     sequence = describe(CASES[name])
     no_complement = any(
-        p.code is not None and not p.code.coding.complement for p in sequence._plans.values()
+        p.code is not None and not p.code.coding.complement for p in sequence.plans().values()
     )
     rng = np.random.default_rng(zlib.crc32(name.encode()))
     error, result, periods = round_trip(

@@ -147,11 +147,14 @@ __all__ = [
     "MAX_FRAMES",
     "RESIDUAL_FLAG_RAD",
     "BitCode",
+    "CodePlan",
+    "DecodePlan",
     "DecodeResult",
     "DecodeWarning",
     "Frame",
     "PatternSequence",
     "PhaseCoding",
+    "PhaseSet",
     "build_sequence",
     "default_sequence",
     "gray_bits_needed",
@@ -657,15 +660,16 @@ def _percentiles(levels: Sequence[float], unit: float) -> dict[str, float | None
 
 
 @dataclass(frozen=True)
-class _PhaseSet:
-    """One period's phase frames: the coding and frame indices of steps 1..N."""
+class PhaseSet:
+    """One period's phase frames: the coding and frame indices of steps 1..N (part of a
+    :class:`DecodePlan`)."""
 
     coding: PhaseCoding
     indices: tuple[int, ...]
 
 
 @dataclass(frozen=True)
-class _CodePlan:
+class CodePlan:
     """A direction's code frames: per bit (most significant first, complement last) the
     index of the frame showing it and of the one showing its inverse (or None)."""
 
@@ -675,12 +679,13 @@ class _CodePlan:
 
 
 @dataclass(frozen=True)
-class _Plan:
-    """Which frames decode one direction, and how (checked once, at construction)."""
+class DecodePlan:
+    """Which frames decode one direction, and how (checked once, when a
+    :class:`PatternSequence` is made; :meth:`PatternSequence.plan`)."""
 
     method: str  # "code", "temporal", "heterodyne" or "window"
-    sets: tuple[_PhaseSet, ...]  # ascending period: sets[0] is the reported (finest) period
-    code: _CodePlan | None = None
+    sets: tuple[PhaseSet, ...]  # ascending period: sets[0] is the reported (finest) period
+    code: CodePlan | None = None
 
     @property
     def periods(self) -> tuple[float, ...]:
@@ -726,7 +731,7 @@ class PatternSequence:
     height: int
     frames: tuple[Frame, ...]
     scale: tuple[float, float] = (1.0, 1.0)
-    _plans: dict[str, _Plan] = field(init=False, repr=False, compare=False)
+    _plans: dict[str, DecodePlan] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "width", positive_int("width", self.width))
@@ -749,6 +754,17 @@ class PatternSequence:
         """Directions present, in ``("v", "h")`` order."""
         return tuple(d for d in DIRECTIONS if d in self._plans)
 
+    def plans(self) -> dict[str, DecodePlan]:
+        """Direction -> how it decodes (:class:`DecodePlan`), for the directions present:
+        what :meth:`decode` follows, and any other decoder of these frames (the device
+        decoder, :mod:`virtus.render.decode_jit`)."""
+        return dict(self._plans)
+
+    def plan(self, direction: str) -> DecodePlan | None:
+        """``direction``'s :class:`DecodePlan`, or None when it is absent."""
+        self.span(direction)
+        return self._plans.get(direction)
+
     def span(self, direction: str) -> int:
         """Projector px along the axis that ``direction``'s fringes vary on."""
         if direction not in DIRECTIONS:
@@ -760,7 +776,7 @@ class PatternSequence:
         self.span(direction)
         return self.scale[DIRECTIONS.index(direction)]
 
-    def _extent(self, direction: str) -> float:
+    def extent(self, direction: str) -> float:
         """Pattern units from the first to the last pixel centre, plus one."""
         return self.axis_scale(direction) * (self.span(direction) - 1.0) + 1.0
 
@@ -787,16 +803,16 @@ class PatternSequence:
 
     # --- planning -----------------------------------------------------------------------
 
-    def _plan_direction(self, direction: str) -> _Plan | None:
+    def _plan_direction(self, direction: str) -> DecodePlan | None:
         mine = [(i, f) for i, f in enumerate(self.frames) if f.direction == direction]
         if not mine:
             return None
         sets = self._phase_sets(direction, [(i, f) for i, f in mine if f.kind == "phase"])
         periods = tuple(s.coding.period for s in sets)
-        extent = self._extent(direction)
+        extent = self.extent(direction)
         code_frames = [(i, f) for i, f in mine if f.kind != "phase"]
         if code_frames:
-            return _Plan("code", sets, self._code_plan(direction, periods, code_frames))
+            return DecodePlan("code", sets, self._code_plan(direction, periods, code_frames))
         if len(periods) == 1:
             if periods[0] < extent:
                 raise InputError(
@@ -804,9 +820,9 @@ class PatternSequence:
                     f"a code, more periods, or a period >= {extent:g} ({direction!r})",
                     f"one period of {periods[0]:.6g}",
                 )
-            return _Plan("window", sets)
+            return DecodePlan("window", sets)
         if periods[-1] >= extent:
-            return _Plan("temporal", sets)
+            return DecodePlan("temporal", sets)
         longest = max(_phase.beat_period(periods[0], p) for p in periods[1:])
         if longest < extent:
             raise InputError(
@@ -814,10 +830,10 @@ class PatternSequence:
                 f"periods whose longest beat (or longest period) is >= {extent:g} ({direction!r})",
                 f"{longest:.6g} for periods {list(periods)}",
             )
-        return _Plan("heterodyne", sets)
+        return DecodePlan("heterodyne", sets)
 
     @staticmethod
-    def _phase_sets(direction: str, frames: list[tuple[int, Frame]]) -> tuple[_PhaseSet, ...]:
+    def _phase_sets(direction: str, frames: list[tuple[int, Frame]]) -> tuple[PhaseSet, ...]:
         """Phase sets of one direction, ascending period, each with steps 1..N once."""
         codings: dict[float, PhaseCoding] = {}
         by_period: dict[float, dict[int, int]] = {}
@@ -846,12 +862,12 @@ class PatternSequence:
                     sorted(by_period[period]),
                 )
             indices = tuple(by_period[period][n] for n in range(1, steps + 1))
-            sets.append(_PhaseSet(codings[period], indices))
+            sets.append(PhaseSet(codings[period], indices))
         return tuple(sets)
 
     def _code_plan(
         self, direction: str, periods: tuple[float, ...], frames: list[tuple[int, Frame]]
-    ) -> _CodePlan:
+    ) -> CodePlan:
         """Check a direction's code frames and say which frame shows which bit."""
         if len(periods) != 1 or any(f.period != periods[0] for _, f in frames):
             raise InputError(
@@ -896,7 +912,7 @@ class PatternSequence:
                 f"({align}-aligned{extra})",
                 bits,
             )
-        return _CodePlan(
+        return CodePlan(
             coding,
             tuple(slots.get((b, False)) for b in order),
             tuple(slots.get((b, True)) for b in order),
@@ -1110,12 +1126,12 @@ class PatternSequence:
             )
             modulations += decoded.pop("modulations")
             backgrounds += decoded.pop("backgrounds")
-            if self._runs_neighbour_check(direction, neighbour_check, repair):
-                repaired += self._check_neighbours(direction, decoded, repair)
+            if self.runs_neighbour_check(direction, neighbour_check, repair):
+                repaired += self.check_neighbours(direction, decoded, repair)
             decoded["flags"] &= decoded["valid"]
             decoded["phase"] = np.where(decoded["valid"], decoded["phase"], np.nan)
             out[direction] = decoded
-        return self._result(
+        return self.assemble_result(
             out,
             modulation=np.minimum.reduce(modulations) if modulations else nan,
             background=np.mean(backgrounds, axis=0) if backgrounds else nan,
@@ -1123,7 +1139,7 @@ class PatternSequence:
             full_scale=full_scale,
         )
 
-    def _runs_neighbour_check(
+    def runs_neighbour_check(
         self, direction: str, neighbour_check: bool | None, repair: bool
     ) -> bool:
         """Whether :meth:`decode` compares ``direction``'s orders with neighbours: when
@@ -1135,7 +1151,7 @@ class PatternSequence:
         )
         return bool(neighbour_check or repair or (neighbour_check is None and not per_pixel_check))
 
-    def _result(
+    def assemble_result(
         self,
         out: dict[str, dict[str, Any]],
         *,
@@ -1218,7 +1234,7 @@ class PatternSequence:
         self,
         stack: np.ndarray,
         direction: str,
-        plan: _Plan,
+        plan: DecodePlan,
         threshold: np.ndarray | None,
         min_modulation: float,
         saturation_level: float | None,
@@ -1242,7 +1258,7 @@ class PatternSequence:
             modulations.append(modulation)
             backgrounds.append(background)
         flags = np.zeros(stack.shape[1:], dtype=bool)
-        extent = self._extent(direction)
+        extent = self.extent(direction)
         if plan.method == "code":
             code = plan.code
             cut = backgrounds[0] if threshold is None else threshold
@@ -1273,7 +1289,7 @@ class PatternSequence:
             "backgrounds": backgrounds,
         }
 
-    def _check_neighbours(self, direction: str, decoded: dict[str, Any], repair: bool) -> int:
+    def check_neighbours(self, direction: str, decoded: dict[str, Any], repair: bool) -> int:
         """Flag (or repair) orders that disagree with neighbours; returns pixels repaired."""
         spatial, correction = _phase.order_consistency(
             decoded["phase"], decoded.pop("wrapped"), decoded["valid"]
@@ -1287,7 +1303,7 @@ class PatternSequence:
         return int(np.count_nonzero(spatial))
 
 
-def _read_bits(stack: np.ndarray, code: _CodePlan, threshold: np.ndarray) -> np.ndarray:
+def _read_bits(stack: np.ndarray, code: CodePlan, threshold: np.ndarray) -> np.ndarray:
     """(bits (+1), H, W) bool: each bit from its pair (frame brighter than its inverse) or
     from one frame against the threshold; most significant first, complement last."""
     rows = []

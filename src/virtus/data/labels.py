@@ -173,18 +173,6 @@ def array_layout(
     return tuple(specs)
 
 
-def _finest_phase_frames(sequence: Any, direction: str) -> tuple[list[int], Any]:
-    """Frame indices (step order) and coding of ``direction``'s finest phase set."""
-    period = sequence.periods(direction)[0]
-    frames = [
-        (f.step, i)
-        for i, f in enumerate(sequence.frames)
-        if f.kind == "phase" and f.direction == direction and f.period == period
-    ]
-    indices = [i for _, i in sorted(frames)]
-    return indices, sequence.frames[indices[0]].coding()
-
-
 def modulation(frames: np.ndarray, out: np.ndarray) -> np.ndarray:
     """Least-squares modulation ``B`` of N phase-shifted images, in ``out``'s dtype.
 
@@ -231,7 +219,8 @@ def _direction_labels(
     axis = 0 if direction == "v" else 1
     period = sequence.periods(direction)[0]
     scale = sequence.axis_scale(direction)
-    indices, coding = _finest_phase_frames(sequence, direction)
+    finest = sequence.plan(direction).sets[0]  # the phase set of the finest period
+    indices, coding = list(finest.indices), finest.coding
     for row in range(0, valid.shape[0], _BLOCK_ROWS):
         rows = slice(row, row + _BLOCK_ROWS)
         mask = valid[rows]

@@ -21,7 +21,6 @@ rounding (the device's ``sin``, ``cos`` and fused multiply-adds are not numpy's)
 
 from __future__ import annotations
 
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -34,7 +33,6 @@ from virtus.data.labels import (
     OBJECT_TOLERANCE_M,
     ArrayOps,
     ArraySpec,
-    _finest_phase_frames,
     surface_distance,
 )
 from virtus.data.sampling import SampleSpec
@@ -125,7 +123,7 @@ def _direction_labels(
     ``_direction_labels``: phase, wrap and order in float64, the rest in ``real``)."""
     period = sequence.periods(direction)[0]
     scale = sequence.axis_scale(direction)
-    indices, coding = _finest_phase_frames(sequence, direction)
+    finest = sequence.plan(direction).sets[0]  # the phase set of the finest period
     valid = truth.valid
     pattern = scale * truth.proj_uv[0 if direction == "v" else 1]  # pattern units
     absolute = pattern * (_phase.TWO_PI / period)  # phase.coordinate_to_phase
@@ -133,8 +131,8 @@ def _direction_labels(
     order = dr.round((absolute - wrapped) / _phase.TWO_PI)
     nan = float("nan")
     wrapped_out = dr.select(valid, real(wrapped), nan)
-    _, _, modulation = wrapped_phase_set(reader, SimpleNamespace(indices=indices, coding=coding))
-    amplitude = (0.5 * coding.steps) * real(modulation)
+    _, _, modulation = wrapped_phase_set(reader, finest)
+    amplitude = (0.5 * finest.coding.steps) * real(modulation)
     return {
         "phase": dr.select(valid, real(absolute), nan),
         "wrapped": wrapped_out,

@@ -5,8 +5,9 @@ Frames on the device are one flat array of ``F * H * W`` values, frame-major: fr
 occupies ``[f P, (f + 1) P)`` with ``P = H W`` pixels in row-major order (``pixel = row W +
 col``); its type is ``UInt8`` (8-bit sensors), ``UInt32`` (deeper sensors) or ``Float``.
 :func:`decode_on_device` vectorises over the ``P`` pixels and unrolls the frames in Python,
-so one decode is one fused kernel; it follows the sequence's own plan (``_plans``: phase sets,
-code frames per bit, unwrapping method) and the formulas of :mod:`virtus.phase` step by step.
+so one decode is one fused kernel; it follows the sequence's own plan
+(:meth:`~virtus.patterns.PatternSequence.plans`: phase sets, code frames per bit, unwrapping
+method) and the formulas of :mod:`virtus.phase` step by step.
 :meth:`DeviceDecode.to_host` brings the result back in one transfer as the host's
 :class:`~virtus.patterns.DecodeResult`, optionally finishing with the host's neighbour check.
 
@@ -47,16 +48,16 @@ from virtus.patterns import (
     DIRECTIONS,
     RESIDUAL_FLAG_RAD,
     BitCode,
+    DecodePlan,
     DecodeResult,
     PatternSequence,
-    _Plan,
 )
 from virtus.render.backend import mitsuba, variant_of
 
 __all__ = ["DeviceDecode", "decode_on_device", "frames_to_device", "supports"]
 
 TWO_PI = _phase.TWO_PI
-#: Unwrapping methods of ``PatternSequence._plans`` this module decodes.
+#: Unwrapping methods (``DecodePlan.method``) this module decodes.
 METHODS = ("code", "temporal", "heterodyne", "window")
 #: Precisions of the per-pixel arithmetic.
 PRECISIONS = ("float32", "float64")
@@ -154,7 +155,7 @@ class DeviceDecode:
                 f"{len(sequence)} frames, directions {sequence.directions}",
             )
         checks = {
-            d: sequence._runs_neighbour_check(d, neighbour_check, repair) for d in self.directions
+            d: sequence.runs_neighbour_check(d, neighbour_check, repair) for d in self.directions
         }
         planes = self._host_planes(any(checks.values()))
         shape = (self.height, self.width)
@@ -177,12 +178,12 @@ class DeviceDecode:
                 # As in PatternSequence.decode: flag (or repair) against neighbours, then
                 # keep flags and phases of valid pixels only.
                 decoded["wrapped"] = planes[f"wrapped_{direction}"]
-                repaired += sequence._check_neighbours(direction, decoded, repair)
+                repaired += sequence.check_neighbours(direction, decoded, repair)
                 decoded["flags"] &= decoded["valid"]
                 decoded["phase"] = np.where(decoded["valid"], decoded["phase"], np.nan)
             out[direction] = decoded
         present = [out[d]["modulation"] for d in self.directions]
-        return sequence._result(
+        return sequence.assemble_result(
             out,
             modulation=np.minimum.reduce(present) if present else nan,
             background=planes["background"] if present else nan,
@@ -221,7 +222,7 @@ class DeviceDecode:
 def supports(sequence: PatternSequence) -> bool:
     """True when :func:`decode_on_device` decodes ``sequence`` (every plan uses a method of
     :data:`METHODS`, codes of at most 31 bits with the complement)."""
-    for plan in sequence._plans.values():
+    for plan in sequence.plans().values():
         if plan.method not in METHODS:
             return False
         if plan.code is not None and plan.code.coding.bits + plan.code.coding.complement > 31:
@@ -304,7 +305,7 @@ def decode_on_device(
     if not supports(sequence):
         raise VirtusError(
             f"decode_on_device: unsupported sequence (methods "
-            f"{sorted({p.method for p in sequence._plans.values()})}, "
+            f"{sorted({p.method for p in sequence.plans().values()})}, "
             f"supported {list(METHODS)}, codes of at most 31 bits)"
         )
     if precision not in PRECISIONS:
@@ -335,7 +336,7 @@ def decode_on_device(
     modulations: list[Any] = []
     backgrounds: list[Any] = []
     for direction in DIRECTIONS:
-        plan = sequence._plans.get(direction)
+        plan = sequence.plan(direction)
         if plan is None:
             none = dr.full(mi.Bool, False, pixels)
             out[direction] = {"phase": nan, "valid": none, "flags": none}
@@ -531,7 +532,7 @@ def _decode_direction(
     reader: FrameReader,
     sequence: PatternSequence,
     direction: str,
-    plan: _Plan,
+    plan: DecodePlan,
     threshold: Any | None,
     min_level: Any,
     saturation_level: float | None,
@@ -552,7 +553,7 @@ def _decode_direction(
         modulations.append(modulation)
         backgrounds.append(background)
     flags = dr.full(mi.Bool, False, reader.pixels)
-    extent = sequence._extent(direction)
+    extent = sequence.extent(direction)
     if plan.method == "code":
         absolute, flags = _unwrap_code(reader, sequence, direction, plan, wrapped[0], threshold)
     elif plan.method in ("temporal", "heterodyne"):
@@ -577,7 +578,7 @@ def _decode_direction(
 
 def _coordinate(sequence: PatternSequence, direction: str, absolute: Any) -> Any:
     """``PatternSequence._coordinate``: projector px from the finest period's phase."""
-    plan = sequence._plans[direction]
+    plan = sequence.plans()[direction]
     pattern = absolute * (plan.periods[0] / TWO_PI)
     scale = sequence.axis_scale(direction)
     return pattern if scale == 1.0 else pattern / scale
@@ -587,7 +588,7 @@ def _unwrap_code(
     reader: FrameReader,
     sequence: PatternSequence,
     direction: str,
-    plan: _Plan,
+    plan: DecodePlan,
     phi: Any,
     threshold: Any | None,
 ) -> tuple[Any, Any]:
