@@ -13,9 +13,13 @@
 3. Each missing shard is one task, :func:`render_shard`: render its samples
    (:meth:`virtus.scanner.Scanner.capture`), make their labels
    (:func:`~virtus.data.labels.sample_arrays`) into a shard buffer, write the shard and
-   then its record. A task depends only on the store path and the shard number, so it is
-   idempotent: a retried or repeated task writes the same bytes. Tasks run in this process
-   (``workers=1``: rendering, labelling and writing run side by side on three threads,
+   then its record. On a GPU a sample is rendered and labelled where it is traced
+   (:meth:`~virtus.scanner.Scanner.render_on_device`,
+   :func:`~virtus.data.labels_jit.device_sample_arrays`) and copied once into the buffer,
+   so the host's cores only checksum, compress and write. A task depends only on the store
+   path and the shard number, so it is idempotent: a retried or repeated task writes the
+   same bytes. Tasks run in this process (``workers=1``: rendering, labelling and writing
+   run side by side on three threads,
    :func:`_run_pipelined`), in ``workers`` spawned processes (each owns the shards it is
    given), or as Ray tasks.
 
