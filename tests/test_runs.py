@@ -29,6 +29,29 @@ def _record(path):
     return json.loads((path / RUN_FILE).read_text())
 
 
+def test_a_contender_waits_for_the_lock_holder_to_write_its_pid(tmp_path):
+    # The holder takes the lock, then writes its pid: a contender in between must not
+    # report "pid unknown" (seen when two runs start together on a busy machine).
+    import fcntl
+    import threading
+
+    fd = os.open(tmp_path / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        writer = threading.Timer(0.1, lambda: os.pwrite(fd, b"4242\n", 0))
+        writer.start()
+        with pytest.raises(VirtusError, match=r"in use by another virtus run \(pid 4242\)"):
+            with directory_lock(tmp_path):
+                pass
+        writer.join()
+    finally:
+        os.close(fd)
+    # A finished holder leaves no pid behind.
+    with directory_lock(tmp_path):
+        pass
+    assert (tmp_path / LOCK_FILE).read_text() == ""
+
+
 def test_a_second_run_into_a_locked_directory_is_refused_naming_the_owner(tmp_path):
     with claim_run(tmp_path, "calibrate", CONFIG) as run:
         assert (tmp_path / LOCK_FILE).read_text().strip() == str(os.getpid())

@@ -44,6 +44,7 @@ import fcntl
 import hashlib
 import json
 import os
+import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -61,6 +62,8 @@ LOCK_FILE = ".virtus.lock"
 RUN_FORMAT = "virtus.run/1"
 #: Staging directory (beside the targets) of the files :func:`atomic_write_files` writes.
 TMP_DIR = ".virtus-tmp"
+#: Longest wait (s) for a lock holder to write its pid (it does right after locking).
+_LOCK_OWNER_WAIT_S = 1.0
 #: Times a write is retried when another writer removed the shared staging directory.
 _STAGING_ATTEMPTS = 20
 #: Keys of ``run.json`` that must match for a run to be resumed.
@@ -243,16 +246,30 @@ def directory_lock(directory: str | os.PathLike[str]) -> Iterator[Path]:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            owner = os.pread(fd, 32, 0).decode(errors="replace").strip() or "unknown"
             raise VirtusError(
-                f"{directory} is in use by another virtus run (pid {owner}); wait for it to "
-                "finish or choose another output directory"
+                f"{directory} is in use by another virtus run (pid {_lock_owner(fd)}); wait "
+                "for it to finish or choose another output directory"
             ) from None
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
-        yield lock_path
+        try:
+            yield lock_path
+        finally:
+            os.ftruncate(fd, 0)  # no stale pid for the next contender to report
     finally:
         os.close(fd)  # releases the lock
+
+
+def _lock_owner(fd: int) -> str:
+    """The pid in a held lock file. Its holder writes it just after taking the lock, so a
+    contender arriving in between finds the file empty and waits for it (at most
+    :data:`_LOCK_OWNER_WAIT_S`; ``"unknown"`` after that)."""
+    deadline = time.monotonic() + _LOCK_OWNER_WAIT_S
+    while True:
+        owner = os.pread(fd, 32, 0).decode(errors="replace").strip()
+        if owner or time.monotonic() > deadline:
+            return owner or "unknown"
+        time.sleep(0.005)
 
 
 # -- the run --------------------------------------------------------------------------------
