@@ -372,7 +372,7 @@ def _run_pipelined(
     labelled into a shard buffer, checksummed and compressed on one of
     :data:`_SAMPLE_THREADS` threads; one more thread writes each shard once its samples are
     done. So the work behind the renderer is spread over the samples, not the end of each
-    shard; it is numpy, SHA-256, the compressors and file I/O, which release the GIL.
+    shard; it is numpy, the compressors and file I/O, mostly outside the GIL.
 
     Two shard buffers alternate: a shard's buffer is reused only after the write of the
     shard two before it has finished. At most :data:`_LABEL_QUEUE` rendered samples wait

@@ -426,8 +426,9 @@ class DatasetStore:
             timing[stage] += seconds
             return value
 
-        # SHA-256 and the compressors release the GIL: checksums and chunks are computed on
-        # a few threads while this one writes each array's shard as soon as it is encoded.
+        # The compressors release the GIL (CRC-32C takes ~10 ms a sample): checksums and
+        # chunks are computed on a few threads while this one writes each array's shard as
+        # soon as it is encoded.
         with ThreadPoolExecutor(_WRITE_THREADS) as pool:
             if encoded is None:
                 checksums = [
