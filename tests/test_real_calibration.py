@@ -162,6 +162,8 @@ def test_captures_observed_in_worker_processes_give_the_same_files(tmp_path):
             [tmp_path / "captures"], board=board, out_dir=out, processes=processes
         )
     assert results[0].rms_px == results[2].rms_px
+    with pytest.raises(InputError, match="processes"):
+        calibrate_captures([tmp_path / "captures"], board=board, processes=-1)
     for name in ["calibration.json", *(f"poses/{pose.name}.npz" for pose in poses)]:
         assert (tmp_path / "out_0" / name).read_bytes() == (tmp_path / "out_2" / name).read_bytes()
 

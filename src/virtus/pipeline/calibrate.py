@@ -282,6 +282,20 @@ def observe_processes() -> int:
     return 0 if cpus < MIN_CPUS_FOR_PROCESSES else min(MAX_OBSERVE_PROCESSES, cpus - 1)
 
 
+def _observer_count(processes: int | None) -> int:
+    """``processes`` checked (an integer in 0..:data:`MAX_OBSERVE_PROCESSES`), or
+    :func:`observe_processes` for None."""
+    if processes is None:
+        return observe_processes()
+    if (
+        isinstance(processes, bool)
+        or not isinstance(processes, int)
+        or not 0 <= processes <= MAX_OBSERVE_PROCESSES
+    ):
+        raise InputError("processes", f"an integer in 0..{MAX_OBSERVE_PROCESSES}", processes)
+    return processes
+
+
 def _observe_timed(*arguments: Any) -> tuple[PoseObservation, float]:
     """:func:`observe_arrays` and the seconds it took (in a worker process or here)."""
     start = time.perf_counter()
@@ -555,12 +569,7 @@ def calibrate_rig(
         raise InputError("scanner", "a virtus.scanner.Scanner", type(scanner).__name__)
     if out_dir is None and (resume or overwrite):
         raise InputError("out_dir", "a directory for resume/overwrite", None)
-    if processes is not None and (
-        isinstance(processes, bool)
-        or not isinstance(processes, int)
-        or not 0 <= processes <= MAX_OBSERVE_PROCESSES
-    ):
-        raise InputError("processes", f"an integer in 0..{MAX_OBSERVE_PROCESSES}", processes)
+    processes = _observer_count(processes)
     check_sequence(scanner.sequence)
     if isinstance(poses, str):
         poses = check_pose_spec(poses)  # "Random:6 " and "random:6" are one configuration
@@ -627,7 +636,7 @@ def _run_episode(
         if progress is not None:
             progress(index + 1, len(pose_list), pose.name)
 
-    workers = observe_processes() if processes is None else processes
+    workers = _observer_count(processes)
     with _observer_pool(workers) as pool:
         for index, pose in enumerate(pose_list):
             seed = episode["pose_seeds"][index]
@@ -816,6 +825,7 @@ def calibrate_captures(
         set, ``out_dir`` in use by another run.
     """
     board = board_from_spec(board)
+    workers = _observer_count(processes)
     loaded: list[Capture] = []
     names: list[str] = []
     paths: list[Path | None] = []
@@ -842,7 +852,6 @@ def calibrate_captures(
         "sequence": loaded[0].sequence.to_dict(),
         "fix_intrinsics": bool(fix_intrinsics),
     }
-    workers = observe_processes() if processes is None else processes
     if out_dir is None:
         return _run_captures(loaded, names, board, episode, progress, None, workers)
     inputs = {
