@@ -36,6 +36,7 @@ from virtus.render.tracing import (
     _camera_rays,
     _inside,
     prepare_pass,
+    project_normalized,
 )
 from virtus.scene import Scene
 from virtus.transforms import Pose
@@ -120,16 +121,12 @@ def _device_centre_directions(variant: str, intrinsics: Intrinsics) -> tuple[Any
 def centre_truth_device(ps: Pass) -> DeviceTruth:
     """:func:`virtus.render.tracing.centre_truth` kept on the device (same rays, same
     projector model, float64)."""
-    dr, projector = ps.dr, ps.projector
+    dr = ps.dr
     c = ps.tracer.centre_device(
         list(_device_centre_directions(ps.variant, ps.camera)), ps.rig.cam2proj
     )
-    x, y = c["xn"], c["yn"]
-    if projector.has_distortion:
-        x, y = projector.distort_xy(x, y)
-    u = float(projector.fx) * x + float(projector.cx)
-    v = float(projector.fy) * y + float(projector.cy)
-    outside = c["hit"] & ~_inside(u, v, projector)
+    u, v = project_normalized(ps.projector, c["xn"], c["yn"])
+    outside = c["hit"] & ~_inside(u, v, ps.projector)
     dr.eval(u, v, outside)
     return DeviceTruth(
         points=(c["px"], c["py"], c["pz"]),
@@ -349,9 +346,10 @@ def _project_taps(ps: Pass, tap: dict[str, Any]) -> tuple[Any, Any, Any]:
     if "weight" in tap:
         return tap["weight"], tap["u_p"], tap["v_p"]
     mi, dr, projector = ps.mi, ps.dr, ps.projector
-    x, y = projector.distort_xy(mi.Float64(tap["xn"]), mi.Float64(tap["yn"]))
-    u = mi.Float(float(projector.fx) * x + float(projector.cx))
-    v = mi.Float(float(projector.fy) * y + float(projector.cy))
+    u, v = (
+        mi.Float(c)
+        for c in project_normalized(projector, mi.Float64(tap["xn"]), mi.Float64(tap["yn"]))
+    )
     lit = (tap["radiance"] > 0) & _inside(u, v, projector)
     return (
         dr.select(lit, tap["radiance"], 0.0),

@@ -357,10 +357,8 @@ class _Tracer:
             yn = dr.select(lit, ay / focus + (p_proj.y - ay) * inv_z, 0.0)
         if projector.has_distortion:
             return {"xn": xn, "yn": yn, "radiance": dr.select(lit, radiance, 0.0)}
-        u = float(projector.fx) * xn + float(projector.cx)
-        v = float(projector.fy) * yn + float(projector.cy)
-        lit &= (u >= -0.5) & (u < projector.width - 0.5)
-        lit &= (v >= -0.5) & (v < projector.height - 0.5)
+        u, v = project_normalized(projector, xn, yn)
+        lit &= _inside(u, v, projector)
         return {
             "weight": dr.select(lit, radiance, 0.0),
             "u_p": dr.select(lit, u, 0.0),
@@ -629,6 +627,17 @@ def prepare_pass(
     )  # fmt: skip
 
 
+def project_normalized(projector: Intrinsics, xn: Any, yn: Any) -> tuple[Any, Any]:
+    """The projector model (as ``Intrinsics.project``: distortion, then focal lengths and
+    principal point) on normalised projector coordinates ``xn, yn``: ``(u_p, v_p)`` px.
+    Plain arithmetic, the one formula for numpy arrays on the host and Dr.Jit arrays on
+    the device and inside the tracing kernels (NaN stays NaN)."""
+    x, y = projector.distort_xy(xn, yn) if projector.has_distortion else (xn, yn)
+    u = float(projector.fx) * x + float(projector.cx)
+    v = float(projector.fy) * y + float(projector.cy)
+    return u, v
+
+
 def centre_truth(ps: Pass) -> GroundTruth:
     """Ground truth through the pixel centres (``mask_multibounce`` left empty: it needs
     the taps)."""
@@ -644,15 +653,9 @@ def centre_truth(ps: Pass) -> GroundTruth:
     hit = c["hit"]
     points = np.stack([c["px"], c["py"], c["pz"]], axis=1)
     normals = np.stack([c["nx"], c["ny"], c["nz"]], axis=1).astype(np.float64)
-    xy = np.stack([c["xn"], c["yn"]], axis=1)
-    if projector.has_distortion:
-        finite = np.isfinite(xy[:, 0])
-        xy[finite] = projector.distort_normalized(xy[finite])
-    # The projector model (as Intrinsics.project), on the points' normalised coordinates.
-    proj_uv = np.stack(
-        [projector.fx * xy[:, 0] + projector.cx, projector.fy * xy[:, 1] + projector.cy], axis=1
-    )
-    outside = hit & ~_inside(proj_uv[:, 0], proj_uv[:, 1], projector)
+    u, v = project_normalized(projector, c["xn"], c["yn"])
+    proj_uv = np.stack([u, v], axis=1)
+    outside = hit & ~_inside(u, v, projector)
 
     return GroundTruth(
         depth=points[:, 2].reshape(height, width),
@@ -719,9 +722,9 @@ def trace(
     ]
     s = _concatenate(parts)
     if projector.has_distortion:
-        xy = projector.distort_normalized(np.stack([s["xn"].ravel(), s["yn"].ravel()], axis=1))
-        u_p = (projector.fx * xy[:, 0] + projector.cx).astype(np.float32)
-        v_p = (projector.fy * xy[:, 1] + projector.cy).astype(np.float32)
+        # distorted in float64, as on the device (the taps' coordinates are float32)
+        xn, yn = (s[key].ravel().astype(np.float64) for key in ("xn", "yn"))
+        u_p, v_p = (c.astype(np.float32) for c in project_normalized(projector, xn, yn))
         radiance = s["radiance"].ravel()
         lit = (radiance > 0) & _inside(u_p, v_p, projector)
         weight = np.where(lit, radiance, np.float32(0.0))
