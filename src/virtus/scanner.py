@@ -158,9 +158,9 @@ class Scanner:
     def renders_on_gpu(self) -> bool:
         """Whether this scanner's Mitsuba variant runs on a GPU (a CUDA variant): there,
         frames are best kept on the device (:meth:`render_on_device`)."""
-        from virtus.render.backend import choose_variant
+        from virtus.render.backend import on_gpu
 
-        return choose_variant(self.variant).startswith("cuda")
+        return on_gpu(self.variant)
 
     def render_on_device(
         self,

@@ -211,13 +211,15 @@ def _encode(store: DatasetStore, buffer: dict[str, np.ndarray], slot: int) -> tu
     return 0.0, store.encode_sample(_slot(buffer, slot))
 
 
-def _labels_on_device(randomiser: Randomiser) -> bool:
+def _labels_on_device() -> bool:
     """Whether samples are labelled on the device that renders them: with a GPU variant
-    (:attr:`virtus.scanner.Scanner.renders_on_gpu`), unless :data:`LABELS_ON_DEVICE`
-    says otherwise."""
+    (:func:`virtus.render.backend.on_gpu`; a dataset's scanners render with the default
+    variant), unless :data:`LABELS_ON_DEVICE` says otherwise."""
     if LABELS_ON_DEVICE is not None:
         return LABELS_ON_DEVICE
-    return randomiser.sample(0).scanner.renders_on_gpu
+    from virtus.render.backend import on_gpu
+
+    return on_gpu()
 
 
 def _render_and_label(
@@ -268,7 +270,7 @@ def _fill_shard(
     (``render``, ``labels``)."""
     start, stop = store.shard_bounds(shard, num_samples)
     threads = _synthesis_threads(randomiser)
-    on_device = _labels_on_device(randomiser)
+    on_device = _labels_on_device()
     timing = {"render": 0.0, "labels": 0.0}
     metas = []
     for slot, index in enumerate(range(start, stop)):
@@ -384,7 +386,7 @@ def _run_pipelined(
 
     store, randomiser = _open(path, digest)
     threads = _synthesis_threads(randomiser)
-    on_device = _labels_on_device(randomiser)
+    on_device = _labels_on_device()
     buffers: list[dict[str, np.ndarray]] = []
     writes: deque[tuple[Any, int, list[dict[str, Any]], dict[str, float]]] = deque()
     queue: deque[Any] = deque()  # sample futures not yet known to be done

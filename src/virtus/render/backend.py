@@ -56,6 +56,12 @@ def choose_variant(variant: str | None = None) -> str:
     )
 
 
+def on_gpu(variant: str | None = None) -> bool:
+    """Whether :func:`choose_variant` of ``variant`` runs on a GPU (a CUDA variant): there
+    frames, decodes and labels are best kept on the device."""
+    return choose_variant(variant).startswith("cuda")
+
+
 def mitsuba(variant: str | None = None) -> tuple[ModuleType, ModuleType, str]:
     """Select the variant and return ``(mitsuba, drjit, variant_name)``."""
     import drjit as dr

@@ -354,7 +354,7 @@ def decode_on_device(
     for direction in sequence.directions:
         mask = mask & out[direction]["valid"]
     modulation = nan if not modulations else functools.reduce(dr.minimum, modulations)
-    background = nan if not backgrounds else sum(backgrounds[1:], backgrounds[0]) / len(backgrounds)
+    background = nan if not backgrounds else _sum(backgrounds) / len(backgrounds)
     return DeviceDecode(
         phase_v=out["v"]["phase"],
         phase_h=out["h"]["phase"],

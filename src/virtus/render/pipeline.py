@@ -13,7 +13,7 @@ from virtus.errors import InputError, VirtusError
 from virtus.groundtruth import GroundTruth
 from virtus.optics import ThinLens
 from virtus.projection import ProjectorModel, as_lookup
-from virtus.render.backend import choose_variant, mitsuba
+from virtus.render.backend import mitsuba, on_gpu
 from virtus.render.device import (
     DeviceFrames,
     DeviceTrace,
@@ -250,9 +250,7 @@ def render(
         "projector_lens": projector_lens, "camera_lens": camera_lens,
         "aperture_samples": aperture_samples,
     }  # fmt: skip
-    on_device = synthesis == "jit" or (
-        synthesis == "auto" and choose_variant(variant).startswith("cuda")
-    )
+    on_device = synthesis == "jit" or (synthesis == "auto" and on_gpu(variant))
     if on_device:
         device = render_device(
             rig, scene, sequence, projector=projector, sensor=sensor, seed=seed, **options
