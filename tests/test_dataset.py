@@ -15,7 +15,6 @@ import signal
 import subprocess
 import sys
 import tarfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -499,26 +498,52 @@ def test_every_mode_generates(tmp_path, mode) -> None:
 # -- kill -9 and resume; Ray ----------------------------------------------------------------
 
 
+#: ``python -c`` program: the CLI (arguments after the kill count) killed by SIGKILL in its
+#: k-th shard-file write, after the temporary file is filled and before it is renamed into
+#: place, and so at a point set by the work done, not by the clock: a run is cut short the
+#: same way on a fast machine as on a slow one (a timer let fast machines finish the store).
+_KILLED_IN_WRITE = """
+import os, signal, sys
+import virtus.data.shards as shards
+kill_at, calls, atomic_write = int(sys.argv[1]), [0], shards.atomic_write
+def write(path, fill):
+    calls[0] += 1
+    if calls[0] < kill_at:
+        return atomic_write(path, fill)
+    def fill_then_die(tmp):
+        fill(tmp)
+        os.kill(os.getpid(), signal.SIGKILL)
+    return atomic_write(path, fill_then_die)
+shards.atomic_write = write
+from virtus.cli import main
+main(sys.argv[2:])
+"""
+
+
 @pytest.mark.slow
 def test_killed_and_resumed_runs_end_byte_identical(tmp_path) -> None:
     config = tiny_config(tmp_path, num_samples=200, storage={"shard_samples": 8})
     reference = tmp_path / "reference"
     generate(load_config(config), reference)
     out = tmp_path / "killed"
-    command = [sys.executable, "-m", "virtus", "dataset", "generate", "--config", str(config),
-               "--out", str(out)]  # fmt: skip
+    arguments = ["dataset", "generate", "--config", str(config), "--out", str(out)]
     rng = np.random.default_rng(2026)
     complete = []
-    for _ in range(10):
-        process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        time.sleep(float(rng.uniform(1.2, 3.0)))  # start-up takes ~1.3 s, then ~12 samples/s
-        process.send_signal(signal.SIGKILL)
-        process.wait()
+    # 25 shards of 13 arrays are 325 shard-file writes; 10 runs killed within 25 writes each
+    # leave the store unfinished whatever the machine's speed.
+    for kill_at in rng.integers(1, 26, size=10):
+        killed = subprocess.run(
+            [sys.executable, "-c", _KILLED_IN_WRITE, str(kill_at), *arguments],
+            capture_output=True, text=True, timeout=300,
+        )  # fmt: skip
+        assert killed.returncode == -signal.SIGKILL, (kill_at, killed.stderr)
         complete.append(
             len(DatasetStore.open(out).samples()) if (out / "dataset.json").exists() else 0
         )
-    assert complete == sorted(complete) and complete[-1] < 200, complete
-    final = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert complete == sorted(complete) and 0 < complete[-1] < 200, complete
+    final = subprocess.run(
+        [sys.executable, "-m", "virtus", *arguments], capture_output=True, text=True, timeout=300
+    )
     assert final.returncode == 0, final.stderr
     mine, theirs = store_files(out), store_files(reference)
     differing = sorted(k for k in mine.keys() | theirs.keys() if mine.get(k) != theirs.get(k))
