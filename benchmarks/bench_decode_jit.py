@@ -1,4 +1,4 @@
-"""Decode speed on the device (:func:`virtus.render.decode_jit.decode_on_device`) vs the host.
+"""Decode speed on the device (:func:`virtus.render.jit.decode.decode_on_device`) vs the host.
 
 Run: ``PYTHONPATH=src python benchmarks/bench_decode_jit.py`` (``VIRTUS_MITSUBA_VARIANT=
 cuda_ad_rgb`` or ``llvm_ad_rgb`` to choose the device; default: CUDA if it works). Decodes
@@ -19,7 +19,7 @@ from bench_patterns_decode import ideal_frames
 
 from virtus.patterns import default_sequence
 from virtus.render.backend import mitsuba
-from virtus.render.decode_jit import decode_on_device, frames_to_device
+from virtus.render.jit.decode import decode_on_device, frames_to_device
 
 
 def best_of(function, repeats: int) -> float:

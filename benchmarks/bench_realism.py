@@ -27,11 +27,11 @@ import platform
 import time
 from pathlib import Path
 
-from virtus.devices import default_rig
-from virtus.optics import ThinLens
+from virtus.geometry.devices import default_rig
+from virtus.geometry.optics import ThinLens
 from virtus.patterns import default_sequence
 from virtus.render import synthesize, trace
-from virtus.scene import default_scene
+from virtus.scene.model import default_scene
 
 
 def configurations(aperture_samples: int) -> dict[str, dict]:

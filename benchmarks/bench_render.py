@@ -23,15 +23,15 @@ from pathlib import Path
 
 import numpy as np
 
-from virtus.devices import default_rig
-from virtus.groundtruth import ARRAY_NAMES as GT_NAMES
-from virtus.images import write_frames
+from virtus.capture.groundtruth import ARRAY_NAMES as GT_NAMES
+from virtus.geometry.devices import default_rig
+from virtus.io.images import write_frames
 from virtus.patterns import default_sequence
 from virtus.render import render, synthesize, trace
+from virtus.render.jit.synthesis import synthesize_digital
 from virtus.render.reference import ReferenceRenderer
-from virtus.render.synthesis_jit import synthesize_digital
-from virtus.scene import default_scene
-from virtus.sensor import Sensor
+from virtus.scene.model import default_scene
+from virtus.sensor.camera import Sensor
 
 
 def timed(function, repeats: int) -> tuple[list[float], object]:
@@ -57,12 +57,12 @@ def synced(dr, function):  # noqa: ANN001, ANN201
 def device_section(rig, scene, sequence, args, mitsuba_fps) -> dict:  # noqa: ANN001
     """The device-resident path: frames/s into device memory, decoded, to the host, written
     to Zarr, with its stage split; ratios against per-frame Mitsuba measured above."""
-    from virtus.projection import ProjectorModel
     from virtus.render.backend import mitsuba
-    from virtus.render.device import percentile_of_positive, trace_device
-    from virtus.render.pipeline import render_device
-    from virtus.render.synthesis_jit import synthesize_on_device
+    from virtus.render.jit.synthesis import synthesize_on_device
+    from virtus.render.jit.tracing import percentile_of_positive, trace_device
+    from virtus.render.renderer import render_device
     from virtus.render.tracing import prepare_pass
+    from virtus.sensor.projector import ProjectorModel
 
     n_frames = len(sequence)
     _, dr, _ = mitsuba()
@@ -97,7 +97,7 @@ def device_section(rig, scene, sequence, args, mitsuba_fps) -> dict:  # noqa: AN
     out["mitsuba_frames_per_s"] = fastest
     out["speedup_vs_fastest_mitsuba"] = out["frames_per_s_into_device_memory"] / fastest
     try:
-        from virtus.render.decode_jit import decode_on_device
+        from virtus.render.jit.decode import decode_on_device
     except ImportError:
         decode_on_device = None
     if decode_on_device is not None:

@@ -23,9 +23,9 @@ import numpy as np
 import pytest
 
 from virtus.cli import main
-from virtus.devices import Camera, Rig, default_rig
-from virtus.optics import Intrinsics
-from virtus.runs import directory_lock
+from virtus.geometry.devices import Camera, Rig, default_rig
+from virtus.geometry.optics import Intrinsics
+from virtus.io.runs import directory_lock
 
 # --- builders of the work directory's files --------------------------------------------------
 
@@ -572,10 +572,10 @@ def template(tmp_path_factory) -> Path:
     reconstructed, as the CLI leaves it (its lock file included)."""
     import trimesh
 
+    from virtus.geometry.transforms import Pose
     from virtus.pipeline.scan import reconstruct_capture
     from virtus.scanner import Scanner
-    from virtus.scene import MeshObject, PlaneObject, Scene
-    from virtus.transforms import Pose
+    from virtus.scene.model import MeshObject, PlaneObject, Scene
 
     root = tmp_path_factory.mktemp("template")
     mesh = root / "ball.stl"

@@ -25,10 +25,10 @@ from virtus.calib.projector import apply_homographies, local_homographies
 from virtus.calib.solve import PoseObservation, calibrate_observations, centroid_bias
 from virtus.calib.synthetic import board_image, projector_map
 from virtus.calib.truth import truth_error
-from virtus.devices import Camera, Projector, Rig, default_rig
 from virtus.errors import InputError, VirtusError
-from virtus.optics import Intrinsics
-from virtus.transforms import Pose
+from virtus.geometry.devices import Camera, Projector, Rig, default_rig
+from virtus.geometry.optics import Intrinsics
+from virtus.geometry.transforms import Pose
 
 RIG = default_rig()
 CAM = RIG.camera.intrinsics

@@ -13,11 +13,11 @@ from tests import tolerances as tol
 from virtus.calib.board import board_from_spec
 from virtus.calib.detect import find_grid
 from virtus.calib.poses import BoardPose, paper_poses
-from virtus.devices import Rig, default_rig
 from virtus.errors import VirtusError
+from virtus.geometry.devices import Rig, default_rig
+from virtus.geometry.transforms import Pose
 from virtus.pipeline.calibrate import BOARD_BLUR_M, board_scene, calibrate_rig, recalibrate
 from virtus.scanner import Scanner
-from virtus.transforms import Pose
 
 pytestmark = pytest.mark.slow
 

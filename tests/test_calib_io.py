@@ -25,11 +25,11 @@ from virtus.calib.io import (
     save_opencv_yaml,
     save_paper_txt,
 )
-from virtus.devices import Camera, Projector, Rig
 from virtus.errors import InputError
-from virtus.optics import Intrinsics
-from virtus.safeio import MAX_CONFIG_BYTES
-from virtus.transforms import Pose
+from virtus.geometry.devices import Camera, Projector, Rig
+from virtus.geometry.optics import Intrinsics
+from virtus.geometry.transforms import Pose
+from virtus.io.safeio import MAX_CONFIG_BYTES
 
 #: (width, height) of the test rig's devices: neither square nor the paper's, so a swapped
 #: or assumed size shows.

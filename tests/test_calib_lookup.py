@@ -7,8 +7,8 @@ import pytest
 import virtus.pipeline.calibrate as job
 from tests.test_calibrate_resume import quarter_rig
 from virtus.cli import main
-from virtus.projection import Lookup, ProjectorModel
 from virtus.scanner import Scanner
+from virtus.sensor.projector import Lookup, ProjectorModel
 
 
 @pytest.mark.slow

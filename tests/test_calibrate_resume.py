@@ -23,11 +23,11 @@ import pytest
 
 from tests import tolerances as tol
 from virtus.calib.poses import BoardPose
-from virtus.devices import Camera, Projector, Rig, default_rig
 from virtus.errors import InputError, VirtusError
+from virtus.geometry.devices import Camera, Projector, Rig, default_rig
+from virtus.geometry.transforms import Pose
 from virtus.pipeline.calibrate import calibrate_rig, recalibrate
 from virtus.scanner import Scanner
-from virtus.transforms import Pose
 
 pytestmark = pytest.mark.slow
 

@@ -10,14 +10,14 @@ import pytest
 import yaml
 
 from tests.test_render_support import small_rig
-from virtus.capture import CAPTURE_FORMAT, Capture
+from virtus.capture.capture import CAPTURE_FORMAT, Capture
 from virtus.cli import main
 from virtus.errors import VirtusError
+from virtus.geometry.transforms import Pose
 from virtus.patterns import default_sequence
 from virtus.scanner import Scanner
-from virtus.scene import Scene, SphereObject, TexturedPlaneObject
-from virtus.sensor import SENSOR_PRESETS
-from virtus.transforms import Pose
+from virtus.scene.model import Scene, SphereObject, TexturedPlaneObject
+from virtus.sensor.camera import SENSOR_PRESETS
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -169,7 +169,7 @@ def test_cli_capture_missing_scene_file(tmp_path, capsys) -> None:
 @pytest.mark.parametrize("workers", [0, -1, 2.5])
 def test_frame_writer_refuses_a_bad_thread_count(tmp_path, workers):
     from virtus.errors import InputError
-    from virtus.images import write_frames
+    from virtus.io.images import write_frames
 
     with pytest.raises(InputError, match=r"^workers: expected an integer >= 1"):
         write_frames(tmp_path, np.zeros((1, 4, 4), np.uint8), workers=workers)
@@ -179,7 +179,7 @@ def test_frame_writer_refuses_a_bad_thread_count(tmp_path, workers):
 def test_a_failed_save_names_the_path_and_leaves_no_partial_capture(
     tmp_path, captured, monkeypatch
 ) -> None:
-    import virtus.capture as capture_module
+    import virtus.capture.capture as capture_module
 
     def disk_full(directory, frames, **_options):
         (directory / "000.png").write_bytes(b"half a frame")
@@ -193,7 +193,7 @@ def test_a_failed_save_names_the_path_and_leaves_no_partial_capture(
 
 
 def test_write_json_is_atomic_and_names_the_path(tmp_path) -> None:
-    from virtus.jsonio import write_json
+    from virtus.io.jsonio import write_json
 
     with pytest.raises(OSError) as info:
         write_json(tmp_path / "missing" / "x.json", {"a": 1})

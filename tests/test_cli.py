@@ -47,7 +47,7 @@ def test_help_exits_with_status_zero(capsys):
 def test_rig_info_json_reads_back_as_the_default_rig(capsys):
     import json
 
-    from virtus.devices import Rig, default_rig
+    from virtus.geometry.devices import Rig, default_rig
 
     with pytest.raises(SystemExit) as exit_info:
         main(["rig", "info", "--json"])

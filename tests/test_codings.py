@@ -16,7 +16,6 @@ import pytest
 
 from tests import tolerances as tol
 from tests.test_patterns import sample_coordinates
-from virtus import phase
 from virtus.errors import InputError
 from virtus.patterns import (
     DecodeWarning,
@@ -26,6 +25,7 @@ from virtus.patterns import (
     default_sequence,
     heterodyne_sequence,
     load_sequence_file,
+    phase,
 )
 
 TWO_PI = 2.0 * np.pi

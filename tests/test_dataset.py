@@ -26,10 +26,10 @@ from virtus.data import DatasetConfig, DatasetStore, FringeDataset, generate, lo
 from virtus.data.export import export_webdataset
 from virtus.data.labels import DIRECTIONS, MASKS
 from virtus.data.sampling import Randomiser
-from virtus.devices import Camera, Projector, Rig, default_rig
 from virtus.errors import InputError, VirtusError
-from virtus.optics import Intrinsics
-from virtus.phase import wrapped_phase
+from virtus.geometry.devices import Camera, Projector, Rig, default_rig
+from virtus.geometry.optics import Intrinsics
+from virtus.patterns.phase import wrapped_phase
 from virtus.reconstruct import points_from_decoded
 
 #: Labels -> projector coordinates -> triangulation vs the stored points (the issue's bound).

@@ -1,4 +1,4 @@
-"""Decoding on the device (:mod:`virtus.render.decode_jit`) against the host decoder.
+"""Decoding on the device (:mod:`virtus.render.jit.decode`) against the host decoder.
 
 CI has no GPU: these run the same code on ``llvm_ad_rgb``, the CPU twin of ``cuda_ad_rgb``.
 Frames are synthesised from each sequence's own projector values on a surface that covers
@@ -24,7 +24,7 @@ from virtus.patterns import (
     load_sequence_file,
 )
 from virtus.render.backend import mitsuba
-from virtus.render.decode_jit import decode_on_device, frames_to_device, supports
+from virtus.render.jit.decode import decode_on_device, frames_to_device, supports
 
 VARIANT = "llvm_ad_rgb"
 HEIGHT, WIDTH = 64, 80

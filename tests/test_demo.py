@@ -8,8 +8,8 @@ import pytest
 
 from tests.tolerances import CALIB_RMS_PX
 from virtus.cli import main
+from virtus.io.ply import read_ply
 from virtus.pipeline.demo import TARGETS
-from virtus.ply import read_ply
 
 
 @pytest.mark.slow

@@ -9,19 +9,19 @@ import numpy as np
 import pytest
 
 from tests.test_render_support import small_rig
-from virtus.devices import Camera, Projector, Rig, default_rig
-from virtus.optics import Intrinsics, ThinLens
+from virtus.geometry.devices import Camera, Projector, Rig, default_rig
+from virtus.geometry.optics import Intrinsics, ThinLens
+from virtus.geometry.transforms import Pose
 from virtus.patterns import default_sequence
-from virtus.projection import PROJECTOR_PRESETS, ProjectorModel
 from virtus.render import render
 from virtus.render.backend import mitsuba
-from virtus.render.device import DeviceFrames, percentile_of_positive, trace_device
-from virtus.render.pipeline import render_device
-from virtus.render.sensor_jit import frame_keys, standard_normal_jit
+from virtus.render.jit.noise import frame_keys, standard_normal_jit
+from virtus.render.jit.tracing import DeviceFrames, percentile_of_positive, trace_device
+from virtus.render.renderer import render_device
 from virtus.render.tracing import trace
-from virtus.scene import default_scene
-from virtus.sensor import SENSOR_PRESETS, Sensor, standard_normal
-from virtus.transforms import Pose
+from virtus.scene.model import default_scene
+from virtus.sensor.camera import SENSOR_PRESETS, Sensor, standard_normal
+from virtus.sensor.projector import PROJECTOR_PRESETS, ProjectorModel
 
 VARIANT = "llvm_ad_rgb"
 #: Frames may differ by 1 DN where a value sits on a rounding edge: float32 sums in another
@@ -190,7 +190,7 @@ def test_a_texture_is_reused_only_while_its_image_is_unchanged() -> None:
 
 
 def test_frames_split_over_several_kernels_are_the_same_frames(monkeypatch) -> None:
-    import virtus.render.synthesis_jit as synthesis_jit
+    import virtus.render.jit.synthesis as synthesis_jit
 
     rig, scene, sequence = small_rig(), default_scene(), default_sequence()
     options = {"rng": 2, "variant": VARIANT, "sensor": SENSOR_PRESETS["imx174"]}
@@ -219,7 +219,7 @@ def test_scenes_that_read_files_are_not_cached(tmp_path) -> None:
     import trimesh
 
     from virtus.render.tracing import _reads_files
-    from virtus.scene import MeshObject, Scene
+    from virtus.scene.model import MeshObject, Scene
 
     path = tmp_path / "box.stl"
     trimesh.creation.box((0.1, 0.1, 0.1)).export(path)

@@ -6,10 +6,10 @@ from pathlib import Path
 
 import pytest
 
-from virtus.devices import Camera, Rig, default_rig
+from virtus.geometry.devices import Camera, Rig, default_rig
 from virtus.patterns import default_sequence
 from virtus.render import render
-from virtus.scene import load_scene
+from virtus.scene.model import load_scene
 
 EXAMPLES = sorted((Path(__file__).parent.parent / "examples").glob("*.yaml"))
 

@@ -14,15 +14,15 @@ from tests import tolerances as tol
 from tests.test_render import interior
 from tests.test_render_support import cropped_rig, small_rig
 from virtus.calib.io import save_paper_txt
-from virtus.capture import Capture, import_capture
+from virtus.capture.capture import Capture, import_capture
 from virtus.cli import main
 from virtus.errors import InputError, VirtusError
 from virtus.patterns import default_sequence, load_sequence_file
 from virtus.pipeline.scan import decode_capture, reconstruct_capture
-from virtus.projection import Lookup, ProjectorModel
 from virtus.scanner import Scanner
-from virtus.scene import default_scene
-from virtus.sensor import Sensor
+from virtus.scene.model import default_scene
+from virtus.sensor.camera import Sensor
+from virtus.sensor.projector import Lookup, ProjectorModel
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "sequences"
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from tests.test_dataset import tiny_config
-from virtus.capture import Capture
+from virtus.capture.capture import Capture
 from virtus.data import DatasetStore, generate, load_config
 from virtus.data.labels import array_layout, sample_arrays
 from virtus.data.labels_jit import device_sample_arrays

@@ -13,14 +13,15 @@ from scipy.optimize import least_squares
 from tests import tolerances as tol
 from tests.test_render import interior
 from tests.test_render_support import LAMBERT, cropped_rig, small_rig, sphere_and_plane
+from virtus.capture.groundtruth import ARRAY_NAMES, GroundTruth
 from virtus.errors import InputError
-from virtus.groundtruth import ARRAY_NAMES, GroundTruth
-from virtus.optics import ThinLens
+from virtus.geometry.optics import ThinLens
+from virtus.geometry.transforms import Pose
 from virtus.patterns import default_sequence
 from virtus.render import render, synthesize, trace, tracing
 from virtus.render.reference import ReferenceRenderer
 from virtus.render.tracing import sample_offsets
-from virtus.scene import (
+from virtus.scene.model import (
     AreaLight,
     EnvironmentLight,
     Material,
@@ -29,7 +30,6 @@ from virtus.scene import (
     SphereObject,
     TexturedPlaneObject,
 )
-from virtus.transforms import Pose
 
 #: Bright Lambertian walls: strong interreflections.
 WALL = Material(albedo=0.9, specular=0.0)

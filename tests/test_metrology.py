@@ -20,6 +20,7 @@ from tests.tolerances import (
     SPHERE_RMS_REL,
 )
 from virtus.errors import InputError, VirtusError
+from virtus.geometry.transforms import Pose
 from virtus.metrology import (
     MeshIndex,
     cloud_to_mesh,
@@ -29,8 +30,7 @@ from virtus.metrology import (
     icp_to_mesh,
     sphere_from_4_points,
 )
-from virtus.objects import freeform_object
-from virtus.transforms import Pose
+from virtus.scene.procedural import freeform_object
 
 
 def _sphere_cap(rng, centre, radius, n, noise, outlier_fraction):

@@ -8,7 +8,7 @@ import trimesh
 
 from tests.tolerances import FLOAT64_EXACT, MESH_FILE_REL
 from virtus.errors import InputError
-from virtus.objects import freeform_object, write_freeform_object
+from virtus.scene.procedural import freeform_object, write_freeform_object
 
 
 def test_default_object_is_a_closed_10cm_free_form_surface():

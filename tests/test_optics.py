@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from tests import tolerances as tol
-from virtus.devices import Camera, Projector, Rig, default_rig, projected_size
 from virtus.errors import InputError
-from virtus.isaac import intrinsics_from_isaac, isaac_params
-from virtus.optics import Intrinsics
-from virtus.transforms import Pose
+from virtus.geometry.devices import Camera, Projector, Rig, default_rig, projected_size
+from virtus.geometry.isaac import intrinsics_from_isaac, isaac_params
+from virtus.geometry.optics import Intrinsics
+from virtus.geometry.transforms import Pose
 
 #: A realistic 960 x 960 lens with barrel distortion, tangential terms and k3 (about 25 px of
 #: displacement in the corners), and an off-centre principal point.

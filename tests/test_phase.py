@@ -1,4 +1,4 @@
-"""Decoding math of virtus.phase against ground truth built here (seeded)."""
+"""Decoding math of virtus.patterns.phase against ground truth built here (seeded)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from tests import tolerances as tol
-from virtus import phase
 from virtus.errors import InputError
+from virtus.patterns import phase
 
 TWO_PI = 2.0 * np.pi
 

@@ -15,16 +15,16 @@ from tests.tolerances import (
     TURNTABLE_REFINE_SHIFT_MM,
 )
 from virtus.cli import main
-from virtus.devices import default_rig
 from virtus.errors import InputError, VirtusError
+from virtus.geometry.devices import default_rig
+from virtus.io.ply import read_ply
 from virtus.pipeline.evaluate import evaluate_scan
 from virtus.pipeline.scan import load_rig_file, reconstruct_capture, scan
-from virtus.pipeline.scenes import freeform_scene
 from virtus.pipeline.turntable import turntable_poses, turntable_scan
-from virtus.ply import read_ply
-from virtus.projection import Lookup, ProjectorModel
 from virtus.scanner import Scanner
-from virtus.scene import default_scene
+from virtus.scene.builtin import freeform_scene
+from virtus.scene.model import default_scene
+from virtus.sensor.projector import Lookup, ProjectorModel
 
 #: Blurred projector pixels (bilinear pattern lookup): with perfectly sharp DMD pixels
 #: ("nearest") the phase keeps a pixel staircase that alone gives ~0.3 mm C2M MAE.
@@ -162,7 +162,7 @@ def test_cli_evaluate_errors(
     else:
         path = tmp_path / "cloud.ply"
         if content == "zero":
-            from virtus.ply import write_ply
+            from virtus.io.ply import write_ply
 
             write_ply(path, np.zeros((0, 3)))
         else:
@@ -238,7 +238,7 @@ def test_scan_owns_its_directory_and_overwrite_drops_the_old_evaluation(tmp_path
 def test_stale_derived_files_are_recomputed_or_refused(freeform_scan: Path, tmp_path: Path):
     import shutil
 
-    from virtus.runs import file_digest
+    from virtus.io.runs import file_digest
 
     directory = tmp_path / "copy"
     shutil.copytree(freeform_scan, directory)

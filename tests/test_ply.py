@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from virtus.errors import InputError
-from virtus.ply import PlyError, read_ply, write_ply
+from virtus.io.ply import PlyError, read_ply, write_ply
 
 
 def test_round_trip_float64_with_normals_and_colours(tmp_path: Path) -> None:
@@ -154,6 +154,6 @@ def test_utf8_comments_are_read_and_size_is_bounded(tmp_path: Path, monkeypatch)
     path = write_ply(tmp_path / "c.ply", np.zeros((4, 3)), comments=("scanned at 20 C",))
     path.write_bytes(path.read_bytes().replace(b"20 C", "20 °C".encode()))
     assert "scanned at 20 °C" in read_ply(path).comments
-    monkeypatch.setattr("virtus.ply.MAX_CLOUD_BYTES", 100)
+    monkeypatch.setattr("virtus.io.ply.MAX_CLOUD_BYTES", 100)
     with pytest.raises(InputError, match=r"^point cloud .*c\.ply: expected a PLY file of at most"):
         read_ply(path)

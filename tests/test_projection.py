@@ -9,15 +9,15 @@ import pytest
 from tests import tolerances as tol
 from virtus.errors import InputError
 from virtus.patterns import Frame, PatternSequence, build_sequence
-from virtus.phase import wrapped_phase
-from virtus.projection import (
+from virtus.patterns.phase import wrapped_phase
+from virtus.render.synthesis import synthesize
+from virtus.render.tracing import Trace
+from virtus.sensor.projector import (
     PROJECTOR_PRESETS,
     Lookup,
     ProjectorModel,
     load_projector,
 )
-from virtus.render.synthesis import synthesize
-from virtus.render.tracing import Trace
 
 WIDTH, HEIGHT = 912, 1140
 
@@ -199,7 +199,7 @@ def test_fill_factor_keeps_power_and_darkens_the_gaps() -> None:
 
 
 def test_cos4_falloff() -> None:
-    from virtus.devices import default_rig
+    from virtus.geometry.devices import default_rig
 
     intrinsics = default_rig().projector.intrinsics
     sequence = build_sequence(WIDTH, HEIGHT, periods=1000.0, steps=3, directions=("v",))
@@ -262,7 +262,7 @@ def test_the_device_synthesis_agrees_with_the_host_one() -> None:
     from tests.test_render_support import small_rig
     from virtus.patterns import default_sequence
     from virtus.render import render
-    from virtus.scene import default_scene
+    from virtus.scene.model import default_scene
 
     kwargs = {"projector": PROJECTOR_PRESETS["lightcrafter"], "bit_depth": 12}
     sparse = render(small_rig(), default_scene(), default_sequence(), synthesis="sparse", **kwargs)

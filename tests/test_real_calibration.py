@@ -17,9 +17,10 @@ import pytest
 from tests import tolerances as tol
 from virtus.calib.board import CheckerBoard, CircleBoard, board_from_spec
 from virtus.calib.poses import pose_set
-from virtus.capture import Capture, import_capture
-from virtus.devices import Camera, Projector, Rig, default_rig
+from virtus.capture.capture import Capture, import_capture
 from virtus.errors import InputError, VirtusError
+from virtus.geometry.devices import Camera, Projector, Rig, default_rig
+from virtus.geometry.transforms import Pose
 from virtus.pipeline.calibrate import (
     BOARD_BLUR_M,
     BOARD_TEXEL_M,
@@ -29,8 +30,7 @@ from virtus.pipeline.calibrate import (
     pose_seed,
 )
 from virtus.scanner import Scanner
-from virtus.scene import PlaneObject, Scene
-from virtus.transforms import Pose
+from virtus.scene.model import PlaneObject, Scene
 
 
 def scaled_rig(factor: float) -> Rig:

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from tests.tolerances import NORMALS_EXACT, TRIANGULATION_M
-from virtus.devices import Camera, Projector, Rig, default_rig
 from virtus.errors import InputError
-from virtus.optics import Intrinsics
+from virtus.geometry.devices import Camera, Projector, Rig, default_rig
+from virtus.geometry.optics import Intrinsics
 from virtus.reconstruct import (
     depth_edge_mask,
     depth_map,

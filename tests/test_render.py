@@ -9,13 +9,14 @@ import trimesh
 
 from tests import tolerances as tol
 from tests.test_render_support import LAMBERT, plane_depth, small_rig, tilted_plane
-from virtus.devices import Camera, Projector, Rig, default_rig
 from virtus.errors import InputError
-from virtus.optics import Intrinsics
+from virtus.geometry.devices import Camera, Projector, Rig, default_rig
+from virtus.geometry.optics import Intrinsics
+from virtus.geometry.transforms import Pose
 from virtus.patterns import default_sequence
 from virtus.render import render, synthesize, trace
 from virtus.render.tracing import sample_offsets
-from virtus.scene import (
+from virtus.scene.model import (
     BoxObject,
     Material,
     MeshObject,
@@ -24,8 +25,7 @@ from virtus.scene import (
     SphereObject,
     TexturedPlaneObject,
 )
-from virtus.sensor import Sensor
-from virtus.transforms import Pose
+from virtus.sensor.camera import Sensor
 
 
 @pytest.fixture(scope="module")

@@ -16,12 +16,12 @@ from tests.test_render_support import (
     sphere_and_plane,
     tilted_plane,
 )
-from virtus.devices import default_rig
+from virtus.geometry.devices import default_rig
 from virtus.patterns import default_sequence
 from virtus.reconstruct import points_from_decoded
 from virtus.render import render, synthesize, trace
 from virtus.render.reference import ReferenceRenderer
-from virtus.scene import Scene, default_scene
+from virtus.scene.model import Scene, default_scene
 
 
 @pytest.fixture(scope="module")

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
-from virtus.devices import Camera, Rig, default_rig
-from virtus.optics import Intrinsics
-from virtus.scene import Material, PlaneObject, Scene, SphereObject
-from virtus.transforms import Pose
+from virtus.geometry.devices import Camera, Rig, default_rig
+from virtus.geometry.optics import Intrinsics
+from virtus.geometry.transforms import Pose
+from virtus.scene.model import Material, PlaneObject, Scene, SphereObject
 
 #: Lambertian (Mitsuba "diffuse") material used where closed forms are needed.
 LAMBERT = Material(albedo=0.8, specular=0.0)

@@ -1,4 +1,4 @@
-"""Run ownership of output directories (virtus.runs): lock, record, overwrite, resume,
+"""Run ownership of output directories (virtus.io.runs): lock, record, overwrite, resume,
 atomic writes. No rendering: every test runs in milliseconds."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from virtus.errors import InputError, VirtusError
-from virtus.runs import (
+from virtus.io.runs import (
     LOCK_FILE,
     RUN_FILE,
     TMP_DIR,

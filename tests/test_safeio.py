@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from virtus import safeio
 from virtus.errors import InputError
+from virtus.io import safeio
 
 
 def one_line(error: pytest.ExceptionInfo) -> str:
@@ -277,7 +277,7 @@ def test_unknown_keys_are_refused_with_a_suggestion() -> None:
 
 def test_npz_files_are_read_without_pickles_and_refused_in_one_line(tmp_path):
     from virtus.errors import VirtusError
-    from virtus.safeio import load_npz
+    from virtus.io.safeio import load_npz
 
     good = tmp_path / "good.npz"
     np.savez(good, a=np.arange(3), b=np.eye(2))

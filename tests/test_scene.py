@@ -8,7 +8,8 @@ import trimesh
 import yaml
 
 from virtus.errors import InputError, VirtusError
-from virtus.scene import (
+from virtus.geometry.transforms import Pose
+from virtus.scene.model import (
     BoxObject,
     Material,
     MeshObject,
@@ -20,7 +21,6 @@ from virtus.scene import (
     load_scene,
     load_texture,
 )
-from virtus.transforms import Pose
 
 
 def write_yaml(path, data) -> str:
@@ -248,7 +248,7 @@ def test_mesh_size_and_extent_are_bounded(tmp_path, monkeypatch) -> None:
     path.write_text(_TRIANGLE + "f 1 2 3\n")
     with pytest.raises(InputError, match=r"^mesh .*: expected vertices within \+-1000 m .*scale"):
         MeshObject(path, scale_to_m=1e6).load()
-    monkeypatch.setattr("virtus.scene.MAX_MESH_BYTES", 10)
+    monkeypatch.setattr("virtus.scene.model.MAX_MESH_BYTES", 10)
     with pytest.raises(
         InputError,
         match=r"^MeshObject\.path: expected a mesh file of at most 10 bytes, got '.*part\.obj \(36",

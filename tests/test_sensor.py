@@ -9,11 +9,11 @@ from tests import tolerances as tol
 from tests.test_render_support import small_rig
 from virtus.errors import InputError
 from virtus.patterns import default_sequence
-from virtus.phase import wrapped_phase
+from virtus.patterns.phase import wrapped_phase
 from virtus.render import render, trace
 from virtus.render.synthesis import synthesize
-from virtus.scene import default_scene
-from virtus.sensor import (
+from virtus.scene.model import default_scene
+from virtus.sensor.camera import (
     SENSOR_PRESETS,
     Sensor,
     as_seed,
@@ -231,7 +231,7 @@ def test_vignetting_scales_each_pixel_by_cos4() -> None:
 
 
 def test_saturated_pixels_are_in_the_ground_truth(tmp_path) -> None:
-    from virtus.capture import Capture
+    from virtus.capture.capture import Capture
     from virtus.render import render
 
     rig = small_rig()

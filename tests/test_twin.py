@@ -12,8 +12,8 @@ from tests import tolerances as tol
 from tests.test_real_calibration import scaled_rig
 from virtus.calib.board import board_from_spec
 from virtus.calib.poses import pose_set
-from virtus.devices import Camera, Projector, Rig, default_rig
-from virtus.optics import Intrinsics
+from virtus.geometry.devices import Camera, Projector, Rig, default_rig
+from virtus.geometry.optics import Intrinsics
 from virtus.pipeline.calibrate import (
     BOARD_BLUR_M,
     BOARD_TEXEL_M,
@@ -22,7 +22,7 @@ from virtus.pipeline.calibrate import (
 )
 from virtus.pipeline.twin import validate_twin, write_twin
 from virtus.scanner import Scanner
-from virtus.twin import twin_parameters
+from virtus.twin.parameters import twin_parameters
 
 
 def _run_cli(args: list[str]) -> int:
@@ -55,7 +55,7 @@ def test_twin_command_writes_the_files(tmp_path, capsys):
     assert Rig.load_json(tmp_path / "t" / "rig.json") == rig
     isaac = json.loads((tmp_path / "t" / "isaac.json").read_text())
     assert isaac["metersPerUnit"] == 1.0 and "lens_distortion" in isaac["camera"]
-    from virtus.usd import read_usd
+    from virtus.twin.usd import read_usd
 
     back = read_usd(tmp_path / "t" / "twin.usda").rig
     assert back.camera == rig.camera and back.projector == rig.projector
@@ -114,7 +114,7 @@ def test_twin_validation_round_trip(tmp_path, capsys):
     write_twin_dir = tmp_path / "true_twin"
     rig.save_json(tmp_path / "true_rig.json")
     write_twin(tmp_path / "true_rig.json", write_twin_dir)
-    from virtus.usd import read_usd
+    from virtus.twin.usd import read_usd
 
     twin_rig = read_usd(write_twin_dir / "twin.usda").rig
     true_json.update(twin_rig.to_dict())

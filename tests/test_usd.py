@@ -11,10 +11,12 @@ import pytest
 import trimesh
 
 from tests import tolerances as tol
-from virtus.devices import Camera, Projector, Rig, default_rig, projected_size
-from virtus.isaac import intrinsics_from_isaac, usd_camera_params
-from virtus.optics import Intrinsics
-from virtus.scene import (
+from virtus.geometry.devices import Camera, Projector, Rig, default_rig, projected_size
+from virtus.geometry.isaac import intrinsics_from_isaac, usd_camera_params
+from virtus.geometry.optics import Intrinsics
+from virtus.geometry.transforms import Pose
+from virtus.pipeline.inputs import load_scene
+from virtus.scene.model import (
     BoxObject,
     Material,
     MeshObject,
@@ -22,14 +24,12 @@ from virtus.scene import (
     Scene,
     SphereObject,
     TexturedPlaneObject,
-    load_scene,
 )
-from virtus.transforms import Pose
 
 pxr = pytest.importorskip("pxr")
 from pxr import Gf, Usd, UsdGeom, UsdLux  # noqa: E402
 
-from virtus.usd import CAMERA, PROJECTOR, export_usd, read_usd  # noqa: E402
+from virtus.twin.usd import CAMERA, PROJECTOR, export_usd, read_usd  # noqa: E402
 
 #: Off-centre principal points, fx != fy, distortion on both devices.
 CAMERA_INTR = Intrinsics(2010.3, 2004.9, 441.7, 512.2, 960, 800, (-0.12, 0.08, 4e-4, -6e-4, 0.01))
@@ -210,7 +210,7 @@ def test_scene_is_read_in_the_stage_cameras_frame(tmp_path):
     (ball,) = contents.scene.objects
     np.testing.assert_allclose(ball.center_m, (0.0, 0.0, 2.0), atol=1e-12)
     assert ball.radius_m == pytest.approx(0.1)
-    from virtus.usd import usd_camera_intrinsics
+    from virtus.twin.usd import usd_camera_intrinsics
 
     opened = Usd.Stage.Open(str(path))
     intr = usd_camera_intrinsics(opened.GetPrimAtPath("/cam"), (100, 100))

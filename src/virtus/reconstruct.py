@@ -33,8 +33,8 @@ from virtus.checks import as_float_array, as_member, as_points
 from virtus.errors import InputError
 
 if TYPE_CHECKING:
-    from virtus.devices import Rig
-    from virtus.optics import Intrinsics
+    from virtus.geometry.devices import Rig
+    from virtus.geometry.optics import Intrinsics
 
 __all__ = [
     "Use",

@@ -2,7 +2,7 @@
 
 A :class:`Scanner` holds the rig, the pattern sequence, the projector pixel model, the
 camera sensor and the render settings. ``scanner.capture(scene, cam2world=..., rng=...)``
-renders one pose into a :class:`virtus.capture.Capture`. Every job (capture, scan,
+renders one pose into a :class:`virtus.capture.capture.Capture`. Every job (capture, scan,
 calibrate, demo, turntable) takes a scanner; the command line builds it in one place
 (:func:`virtus.cli.options.build_scanner`).
 """
@@ -14,15 +14,15 @@ from typing import Any
 
 import numpy as np
 
-from virtus.capture import Capture, rendered_provenance
+from virtus.capture.capture import Capture, rendered_provenance
 from virtus.checks import positive_int
-from virtus.devices import Rig, default_rig
 from virtus.errors import InputError
-from virtus.optics import ThinLens
+from virtus.geometry.devices import Rig, default_rig
+from virtus.geometry.optics import ThinLens
+from virtus.geometry.transforms import Pose
 from virtus.patterns import DecodeResult, PatternSequence, default_sequence
-from virtus.projection import Lookup, ProjectorModel
-from virtus.sensor import Sensor, as_seed
-from virtus.transforms import Pose
+from virtus.sensor.camera import Sensor, as_seed
+from virtus.sensor.projector import Lookup, ProjectorModel
 
 #: Largest supersample count (a 32 x 32 grid): beyond it a pose needs > 10 GB of samples
 #: at 960 x 960.
@@ -38,7 +38,7 @@ class DecodedView:
 
     Attributes
     ----------
-    decoded : the decode (as :meth:`virtus.capture.Capture.decode` gives it).
+    decoded : the decode (as :meth:`virtus.capture.capture.Capture.decode` gives it).
     white : (H, W) the sequence's first white frame (digital numbers), or None without one.
     """
 
@@ -54,14 +54,14 @@ class Scanner:
     ----------
     rig : camera, projector and ``proj2cam`` (default: the paper's rig).
     sequence : the projected patterns (default: the paper's 52 frames for the projector).
-    projector : the projector model (:class:`virtus.projection.ProjectorModel`: response,
+    projector : the projector model (:class:`virtus.sensor.projector.ProjectorModel`: response,
         black level, pixel model and PSF, fall-off; default: ideal sharp DMD pixels).
-    sensor : camera model (:class:`virtus.sensor.Sensor`: bit depth, exposure, EMVA 1288).
+    sensor : camera model (:class:`virtus.sensor.camera.Sensor`: bit depth, exposure, EMVA 1288).
     spp : supersamples per camera pixel, a perfect square.
     variant : Mitsuba variant (default: ``$VIRTUS_MITSUBA_VARIANT`` or automatic).
     bounces : path vertices per camera sample that see the projector (1 = direct light;
         more = interreflections, one tap per bounce).
-    projector_lens, camera_lens : thin lenses (:class:`virtus.optics.ThinLens`) for
+    projector_lens, camera_lens : thin lenses (:class:`virtus.geometry.optics.ThinLens`) for
         projector defocus and camera depth of field; None = pinhole (in focus everywhere).
     aperture_samples : projector aperture samples per path vertex (default: the renderer's
         with a projector lens).
@@ -80,7 +80,7 @@ class Scanner:
 
     def __post_init__(self) -> None:
         if not isinstance(self.rig, Rig):
-            raise InputError("rig", "a virtus.devices.Rig", type(self.rig).__name__)
+            raise InputError("rig", "a virtus.geometry.devices.Rig", type(self.rig).__name__)
         projector = self.rig.projector.intrinsics
         if self.sequence is None:
             object.__setattr__(
@@ -96,10 +96,12 @@ class Scanner:
             )
         if not isinstance(self.projector, ProjectorModel):
             raise InputError(
-                "projector", "a virtus.projection.ProjectorModel", type(self.projector).__name__
+                "projector",
+                "a virtus.sensor.projector.ProjectorModel",
+                type(self.projector).__name__,
             )
         if not isinstance(self.sensor, Sensor):
-            raise InputError("sensor", "a virtus.sensor.Sensor", type(self.sensor).__name__)
+            raise InputError("sensor", "a virtus.sensor.camera.Sensor", type(self.sensor).__name__)
         spp = positive_int("spp", self.spp)
         if spp > MAX_SPP:
             raise InputError("spp", f"at most {MAX_SPP} supersamples per pixel", spp)
@@ -114,7 +116,9 @@ class Scanner:
         for name in ("projector_lens", "camera_lens"):
             lens = getattr(self, name)
             if lens is not None and not isinstance(lens, ThinLens):
-                raise InputError(name, "a virtus.optics.ThinLens or None", type(lens).__name__)
+                raise InputError(
+                    name, "a virtus.geometry.optics.ThinLens or None", type(lens).__name__
+                )
 
     @property
     def lookup(self) -> Lookup:
@@ -170,11 +174,11 @@ class Scanner:
         rng: np.random.Generator | int | None = None,
     ) -> Any:
         """Render one pose and keep it on the device that traced it: a
-        :class:`virtus.render.pipeline.DeviceRendering` (frames, taps, ground truth on
+        :class:`virtus.render.renderer.DeviceRendering` (frames, taps, ground truth on
         demand), with :meth:`capture`'s settings and seed: on a GPU the frames are
         :meth:`capture`'s, on a CPU variant they agree within 1 DN (``render``'s
         ``synthesis``)."""
-        from virtus.render.pipeline import render_device
+        from virtus.render.renderer import render_device
 
         return render_device(
             self.rig, scene, self.sequence, projector=self.projector, sensor=self.sensor,
@@ -193,7 +197,7 @@ class Scanner:
         ground truth.
 
         With ``on_device`` (default: on CUDA variants) the frames never leave the device
-        that rendered them: they are decoded there (:mod:`virtus.render.decode_jit`) and
+        that rendered them: they are decoded there (:mod:`virtus.render.jit.decode`) and
         only the decode and the white frame are copied. Otherwise this is exactly
         ``capture(...).decode()``.
         """
@@ -205,7 +209,7 @@ class Scanner:
             capture = self.capture(scene, cam2world=cam2world, rng=rng, command=[])
             frame = None if white is None else capture.frames[white]
             return DecodedView(capture.decode(), frame)
-        from virtus.render.decode_jit import decode_on_device
+        from virtus.render.jit.decode import decode_on_device
 
         frames = self.render_on_device(scene, cam2world=cam2world, rng=rng).frames
         decoded = decode_on_device(
@@ -232,7 +236,7 @@ class Scanner:
 
         Parameters
         ----------
-        scene : a :class:`virtus.scene.Scene` (world frame = camera frame unless
+        scene : a :class:`virtus.scene.model.Scene` (world frame = camera frame unless
             ``cam2world`` places the camera).
         cam2world : camera pose in the scene's world frame (default identity).
         rng : seed of the sensor's counter-based noise streams (int, Generator or None = 0).

@@ -240,7 +240,7 @@ class CircleBoard:
         Returns
         -------
         (H, W) float32 array in [0, 1]; rows along the board's +y, columns along +x, its
-        centre at the board origin (as ``virtus.scene.TexturedPlaneObject`` expects).
+        centre at the board origin (as ``virtus.scene.model.TexturedPlaneObject`` expects).
         """
         pixel = positive("pixel_size_m", pixel_size_m)
         ss = positive_int("supersample", supersample)
@@ -518,7 +518,7 @@ def board_from_spec(
         return spec
     text = str(spec).strip()
     if Path(text).suffix.lower() in (".json", ".yaml", ".yml"):
-        from virtus.safeio import read_json, read_yaml
+        from virtus.io.safeio import read_json, read_yaml
 
         path = Path(text)
         if path.suffix.lower() == ".json":

@@ -51,7 +51,7 @@ in the file and given must agree.
 Bad files never escape as tracebacks: a path that does not exist, or a text folder lacking
 a required file, raises ``FileNotFoundError`` naming it; anything else wrong raises
 :class:`InputError` naming the file and key: an unknown file type, a file over
-:data:`virtus.safeio.MAX_CONFIG_BYTES`, empty, binary or not UTF-8, syntax errors, missing or
+:data:`virtus.io.safeio.MAX_CONFIG_BYTES`, empty, binary or not UTF-8, syntax errors, missing or
 ambiguous keys, wrong shapes, non-finite values, a K that is not ``[[fx, 0, cx], [0, fy,
 cy], [0, 0, 1]]`` with fx, fy > 0, an R that is not a rotation.
 
@@ -71,12 +71,12 @@ import cv2
 import numpy as np
 
 from virtus.checks import as_float_array, positive_int
-from virtus.devices import Camera, Projector, Rig
 from virtus.errors import InputError
-from virtus.jsonio import write_json
-from virtus.optics import Intrinsics
-from virtus.safeio import MAX_CONFIG_BYTES, parse_json, read_text
-from virtus.transforms import Pose, check_rotation
+from virtus.geometry.devices import Camera, Projector, Rig
+from virtus.geometry.optics import Intrinsics
+from virtus.geometry.transforms import Pose, check_rotation
+from virtus.io.jsonio import write_json
+from virtus.io.safeio import MAX_CONFIG_BYTES, parse_json, read_text
 
 #: Names of each calibration quantity in FileStorage nodes and text-file stems (``<name>.txt``),
 #: matched ignoring case, ``_`` and ``-``. The first name is the one virtus writes in YAML.
@@ -576,7 +576,7 @@ def _normalize(name: str) -> str:
 
 
 def _read_text(path: Path) -> str:
-    """The file's text (:func:`virtus.safeio.read_text`: bounded, UTF-8, no NUL), non-empty."""
+    """The file's text (:func:`virtus.io.safeio.read_text`: bounded, UTF-8, no NUL), non-empty."""
     text = read_text(path, "calibration", max_bytes=MAX_CONFIG_BYTES)
     if not text.strip():
         raise InputError(f"calibration {path}", "a calibration file", "an empty file")

@@ -45,9 +45,9 @@ import numpy as np
 
 from virtus.calib.board import CircleBoard
 from virtus.checks import as_rng, positive_int
-from virtus.devices import Rig
 from virtus.errors import InputError, VirtusError
-from virtus.transforms import Pose
+from virtus.geometry.devices import Rig
+from virtus.geometry.transforms import Pose
 
 #: (name, (rx, ry, rz) degrees, t metres) of the paper's 18 poses (see module docstring).
 PAPER_POSE_TABLE: tuple[tuple[str, tuple[float, float, float], tuple[float, float, float]], ...] = (

@@ -33,10 +33,10 @@ import numpy as np
 
 from virtus.calib.board import Board, CircleBoard
 from virtus.calib.projector import apply_homographies
-from virtus.devices import Camera, Projector, Rig
 from virtus.errors import VirtusError
-from virtus.optics import Intrinsics
-from virtus.transforms import Pose
+from virtus.geometry.devices import Camera, Projector, Rig
+from virtus.geometry.optics import Intrinsics
+from virtus.geometry.transforms import Pose
 
 #: Fewest usable poses for a calibration (Zhang's method needs 3 views of a plane).
 MIN_POSES = 3

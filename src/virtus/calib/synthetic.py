@@ -12,9 +12,9 @@ import numpy as np
 
 from virtus.calib.board import CircleBoard
 from virtus.checks import positive_int
-from virtus.devices import Rig
-from virtus.optics import Intrinsics
-from virtus.transforms import Pose
+from virtus.geometry.devices import Rig
+from virtus.geometry.optics import Intrinsics
+from virtus.geometry.transforms import Pose
 
 #: Rows of camera pixels processed at once (bounds memory: rows * width * ss^2 samples).
 _CHUNK_ROWS = 64

@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from virtus.devices import Rig
-from virtus.optics import Intrinsics
+from virtus.geometry.devices import Rig
+from virtus.geometry.optics import Intrinsics
 
 
 def _device_error(estimated: Intrinsics, true: Intrinsics) -> dict[str, Any]:

@@ -52,7 +52,7 @@ def register(app: typer.Typer) -> None:
         from rich.table import Table
 
         from virtus.pipeline.ablation import run_ablation
-        from virtus.sensor import as_seed
+        from virtus.sensor.camera import as_seed
 
         seed = as_seed(seed)
         scanner = build_scanner(rig=rig, spp=spp)

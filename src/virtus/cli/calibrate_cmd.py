@@ -87,7 +87,7 @@ def register(app: typer.Typer) -> None:
             capture_dirs,
             check_pose_spec,
         )
-        from virtus.sensor import as_seed
+        from virtus.sensor.camera import as_seed
 
         # Cheap checks first: nothing is read, rendered or written before they pass.
         the_board = board_from_spec(board)

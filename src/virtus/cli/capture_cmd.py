@@ -56,9 +56,10 @@ def register(app: typer.Typer) -> None:
         OUT/capture.json (rig, pose, patterns, sensor, seed, scene, settings) and OUT/gt/*.npy
         ground truth. OUT is owned by the run (OUT/run.json): another run's directory is
         refused unless --overwrite."""
+        from virtus.pipeline.inputs import load_scene
         from virtus.pipeline.scan import capture_job, check_renderable
-        from virtus.scene import default_scene, load_scene
-        from virtus.sensor import as_seed
+        from virtus.scene.model import default_scene
+        from virtus.sensor.camera import as_seed
 
         # Every check before anything is claimed, rendered or written.
         seed = as_seed(seed)

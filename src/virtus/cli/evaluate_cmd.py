@@ -27,7 +27,7 @@ def register(app: typer.Typer) -> None:
         from rich.console import Console
         from rich.table import Table
 
-        from virtus.pipeline import layout
+        from virtus.capture import scandir as layout
         from virtus.pipeline.evaluate import evaluate_scan
 
         results = evaluate_scan(directory, ply, register=icp)

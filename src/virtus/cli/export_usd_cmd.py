@@ -1,5 +1,5 @@
 """``virtus export-usd``: write a scene and/or a rig as a USD stage for Isaac Sim
-(:func:`virtus.usd.export_usd`)."""
+(:func:`virtus.twin.usd.export_usd`)."""
 
 from __future__ import annotations
 
@@ -35,14 +35,14 @@ def register(app: typer.Typer) -> None:
         distortion in Omniverse's lens-distortion attributes), the projector as a RectLight
         (isProjector) and the scene's objects with UsdPreviewSurface materials, in Isaac's
         world (camera looking along +X, +Z up)."""
-        from virtus.usd import require_usd
+        from virtus.twin.usd import require_usd
 
         require_usd()  # one line without usd-core, before anything is read
         from virtus.calib.io import load_calibration
-        from virtus.devices import default_rig
-        from virtus.images import read_image
-        from virtus.scene import load_scene
-        from virtus.usd import export_usd
+        from virtus.geometry.devices import default_rig
+        from virtus.io.images import read_image
+        from virtus.pipeline.inputs import load_scene
+        from virtus.twin.usd import export_usd
 
         the_rig = load_calibration(rig) if rig is not None else default_rig()
         the_scene = load_scene(scene) if scene is not None else None

@@ -52,9 +52,9 @@ def register(app: typer.Typer) -> None:
         from rich.table import Table
 
         from virtus.calib.io import load_calibration
-        from virtus.capture import import_capture
+        from virtus.capture.capture import import_capture
         from virtus.errors import InputError
-        from virtus.images import list_images, read_image
+        from virtus.io.images import list_images, read_image
         from virtus.patterns import load_sequence_file
         from virtus.pipeline.scan import capture_job, check_baseline
 
@@ -116,6 +116,6 @@ def register(app: typer.Typer) -> None:
 
 
 def _first_image(folder: Path) -> Path:
-    from virtus.images import list_images
+    from virtus.io.images import list_images
 
     return list_images(folder)[0]

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from virtus.projection import Lookup
+from virtus.sensor.projector import Lookup
 
 if TYPE_CHECKING:
     from virtus.scanner import Scanner
@@ -109,9 +109,9 @@ def load_sequence_option(path: Path | None, width: int, height: int):  # noqa: A
 
 
 def parse_lens(text: str | None, option: str):  # noqa: ANN201
-    """A :class:`virtus.optics.ThinLens` from ``'APERTURE_M,FOCUS_M'``, or None."""
+    """A :class:`virtus.geometry.optics.ThinLens` from ``'APERTURE_M,FOCUS_M'``, or None."""
     from virtus.errors import InputError
-    from virtus.optics import ThinLens
+    from virtus.geometry.optics import ThinLens
 
     if text is None:
         return None
@@ -138,10 +138,10 @@ def build_scanner(
     camera_lens: str | None = None,
 ) -> Scanner:
     """The Scanner the command-line options describe (every job builds it here)."""
-    from virtus.devices import Rig, default_rig
-    from virtus.projection import load_projector
+    from virtus.geometry.devices import Rig, default_rig
     from virtus.scanner import Scanner
-    from virtus.sensor import load_sensor
+    from virtus.sensor.camera import load_sensor
+    from virtus.sensor.projector import load_projector
 
     the_sensor = load_sensor(sensor)
     if bit_depth is not None:

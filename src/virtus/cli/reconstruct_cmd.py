@@ -51,7 +51,7 @@ def register(app: typer.Typer) -> None:
         from rich.console import Console
         from rich.table import Table
 
-        from virtus.pipeline import layout
+        from virtus.capture import scandir as layout
         from virtus.pipeline.scan import reconstruct_capture
 
         start = time.perf_counter()

@@ -27,7 +27,7 @@ def register(app: typer.Typer) -> None:
         ] = PAPER_PIXEL_SIZE_MM,
     ) -> None:
         """Print the rig (DESIGN schema), Isaac Sim camera parameters and projected size."""
-        from virtus.devices import Rig, default_rig, rig_info
+        from virtus.geometry.devices import Rig, default_rig, rig_info
 
         the_rig = Rig.load_json(rig) if rig is not None else default_rig()
         data = rig_info(the_rig, pixel_size_mm)

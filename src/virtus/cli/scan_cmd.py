@@ -82,11 +82,12 @@ def register(app: typer.Typer) -> None:
         from rich.console import Console
         from rich.table import Table
 
+        from virtus.pipeline.inputs import resolve_scene
         from virtus.pipeline.scan import ScanSettings, load_rig_file
         from virtus.pipeline.scan import scan as run_scan
-        from virtus.pipeline.scenes import BUILTIN_SCENES, resolve_scene
         from virtus.pipeline.turntable import check_views
-        from virtus.sensor import as_seed
+        from virtus.scene.builtin import BUILTIN_SCENES
+        from virtus.sensor.camera import as_seed
 
         # Every check before anything is claimed, rendered or written.
         settings = ScanSettings(seed=as_seed(seed))
@@ -139,10 +140,10 @@ def _turntable(console, scene, out, n_views, scanner, calibration, settings, ref
     from rich.table import Table
 
     from virtus.errors import InputError
-    from virtus.pipeline.scenes import FREEFORM_CENTRE_M
+    from virtus.geometry.transforms import Pose
     from virtus.pipeline.turntable import turntable_scan
-    from virtus.scene import MeshObject
-    from virtus.transforms import Pose
+    from virtus.scene.builtin import FREEFORM_CENTRE_M
+    from virtus.scene.model import MeshObject
 
     if scene == "freeform":  # the built-in object, written into OUT by the run
         mesh_path, scale, start = None, 1.0, Pose(np.eye(3), FREEFORM_CENTRE_M)

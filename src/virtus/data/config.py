@@ -2,7 +2,7 @@
 
 A configuration is read from YAML (:func:`load_config`) or a mapping
 (:meth:`DatasetConfig.from_dict`); unknown keys anywhere are refused with the key named
-(:func:`virtus.safeio.check_keys`), every number and size is bounded, and every file it
+(:func:`virtus.io.safeio.check_keys`), every number and size is bounded, and every file it
 names (rig, sensor, projector, sequence files, mesh folders) is checked before any work
 starts. :meth:`DatasetConfig.to_dict` gives the canonical form (absolute paths, defaults
 filled in) that a store records in ``dataset.json`` and that ``from_dict`` reads back.
@@ -40,7 +40,7 @@ number; lists of choices are drawn uniformly per sample)::
         - {type: mesh_folder, path: meshes/, size_m: [0.05, 0.15], weight: 1}
     materials: {albedo: [0.3, 1.0], roughness: [0.3, 1.0], specular: [0.0, 0.5],
                 metal_probability: 0.0}
-    ambient: [0.0, 0.2]            # relative to the projector's white (virtus.scene)
+    ambient: [0.0, 0.2]            # relative to the projector's white (virtus.scene.model)
     planes: {count: [1, 1], distance_m: [1.2, 1.4], tilt_deg: 20, size_m: 2.0}
     turntable: {views: 12, tilt_deg: 15}                      # scan mode
     board: {spec: "4x7"}                                      # calibration mode
@@ -59,7 +59,7 @@ from pathlib import Path
 from typing import Any
 
 from virtus.errors import InputError
-from virtus.safeio import check_keys, read_yaml
+from virtus.io.safeio import check_keys, read_yaml
 
 __all__ = [
     "CODECS",
@@ -198,7 +198,7 @@ class ObjectSource:
 
     Attributes
     ----------
-    type : ``sphere``, ``box``, ``freeform`` (:func:`virtus.objects.freeform_object` with a
+    type : ``sphere``, ``box``, ``freeform`` (:func:`virtus.scene.procedural.freeform_object` with a
         per-instance shape seed) or ``mesh_folder`` (every .stl/.obj/.ply file of ``path``).
     size_m : range of the object's size, metres: the radius of a sphere, the edge lengths of
         a box, the largest bounding-box extent of a free-form or mesh object.
@@ -233,7 +233,7 @@ class ObjectSource:
 
 
 def _source(name: str, data: Any, base: Path | None) -> ObjectSource:
-    from virtus.scene import MESH_SUFFIXES
+    from virtus.scene.model import MESH_SUFFIXES
 
     if not isinstance(data, Mapping) or data.get("type") not in SOURCE_TYPES:
         got = data.get("type") if isinstance(data, Mapping) else data
@@ -417,8 +417,8 @@ class DatasetConfig:
             file, an empty mesh folder, or a combination that cannot be generated.
         """
         from virtus.pipeline.ablation import AMBIENTS, MATERIALS
-        from virtus.projection import PROJECTOR_PRESETS
-        from virtus.sensor import SENSOR_PRESETS
+        from virtus.sensor.camera import SENSOR_PRESETS
+        from virtus.sensor.projector import PROJECTOR_PRESETS
 
         base = None if base_dir is None else Path(base_dir)
         data = check_keys(data, _TOP_KEYS, "dataset config")
@@ -618,7 +618,7 @@ class DatasetConfig:
 
 def load_config(path: str | Path) -> DatasetConfig:
     """Read and validate a dataset configuration YAML file (through
-    :func:`virtus.safeio.read_yaml`: size, UTF-8, aliases, depth, duplicate keys)."""
+    :func:`virtus.io.safeio.read_yaml`: size, UTF-8, aliases, depth, duplicate keys)."""
     path = Path(path)
     data = read_yaml(path, "dataset config", expect=dict)
     return DatasetConfig.from_dict(data, base_dir=path.resolve().parent)

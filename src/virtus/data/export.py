@@ -20,7 +20,7 @@ import numpy as np
 
 from virtus.data.store import DatasetStore
 from virtus.errors import InputError
-from virtus.runs import atomic_write
+from virtus.io.runs import atomic_write
 
 __all__ = ["MAX_SAMPLES_PER_TAR", "export_webdataset"]
 

@@ -7,7 +7,7 @@
    instances (:class:`~virtus.data.sampling.Randomiser`), the output folder (writable; empty,
    new, or a store of the same configuration) and the sizes (samples, workers, shard
    memory).
-2. Under the output folder's lock (:func:`virtus.runs.directory_lock`: one generating
+2. Under the output folder's lock (:func:`virtus.io.runs.directory_lock`: one generating
    process at a time), the store is created or extended (:meth:`DatasetStore.prepare`) and
    its manifest says which shards are missing.
 3. Each missing shard is one task, :func:`render_shard`: render its samples
@@ -45,7 +45,7 @@ from virtus.data.labels import array_layout, sample_arrays
 from virtus.data.sampling import Randomiser, SampleSpec
 from virtus.data.store import ASSETS_DIR, DatasetStore, EncodedSample
 from virtus.errors import InputError
-from virtus.runs import directory_lock, file_digest
+from virtus.io.runs import directory_lock, file_digest
 
 __all__ = [
     "TIMING_KEYS",

@@ -1,6 +1,6 @@
 """The arrays of one sample: frames and exact labels from the capture's ground truth.
 
-Labels are computed from :class:`virtus.groundtruth.GroundTruth` (the surface seen through
+Labels are computed from :class:`virtus.capture.groundtruth.GroundTruth` (the surface seen through
 each camera pixel centre and its exact projector coordinates), never by decoding the
 frames. Every array of a sample, by name (``H x W`` camera pixels indexed ``[row, col]``;
 per-direction labels stack the directions ``(v, h)`` on their first axis: index 0 is
@@ -34,7 +34,7 @@ vertical fringes (along ``u_p``), index 1 horizontal fringes (along ``v_p``))::
 order and numerator/denominator are NaN (order -1) outside the valid mask and for a
 direction the sample's sequence does not have. ``numerator``/``denominator`` use the exact
 wrapped phase and the measured modulation ``B`` (the amplitude a network sees), in the
-sign convention of :mod:`virtus.phase`: ``I_n = A + B cos(phi + 2 pi n / N)`` gives
+sign convention of :mod:`virtus.patterns.phase`: ``I_n = A + B cos(phi + 2 pi n / N)`` gives
 ``-sum I_n sin(2 pi n/N) = (N/2) B sin(phi)`` and ``sum I_n cos(2 pi n/N) = (N/2) B cos(phi)``.
 Each stacked array records its channel names (``ArraySpec.channels``) in ``dataset.json``
 and in its Zarr attributes.
@@ -52,9 +52,9 @@ from typing import Any
 
 import numpy as np
 
-from virtus import phase as _phase
 from virtus.data.sampling import ObjectRecord, SampleSpec
-from virtus.transforms import Pose
+from virtus.geometry.transforms import Pose
+from virtus.patterns import phase as _phase
 
 __all__ = [
     "DIRECTIONS",
@@ -176,7 +176,7 @@ def array_layout(
 def modulation(frames: np.ndarray, out: np.ndarray) -> np.ndarray:
     """Least-squares modulation ``B`` of N phase-shifted images, in ``out``'s dtype.
 
-    The ``modulation`` of :func:`virtus.phase.wrapped_phase`: with shifts
+    The ``modulation`` of :func:`virtus.patterns.phase.wrapped_phase`: with shifts
     ``d_n = 2 pi n / N``, ``B = (2 / N) hypot(sum I_n cos d_n, sum I_n sin d_n)`` (the sign
     and offset of a coding do not change it). Computed in ``out``'s precision, by blocks of
     :data:`_BLOCK_ROWS` rows (small temporaries instead of an (N, H, W) real copy), with
@@ -364,7 +364,7 @@ def sample_arrays(
 
     Parameters
     ----------
-    capture : the sample's :class:`virtus.capture.Capture` (with ground truth).
+    capture : the sample's :class:`virtus.capture.capture.Capture` (with ground truth).
     spec : its specification (objects, cam2world).
     layout : the store's arrays (:func:`array_layout`).
     out : name -> writable array of the layout's per-sample shape and dtype (e.g. one

@@ -1,8 +1,8 @@
 """A sample's arrays made on the device that rendered it: the GPU path of dataset labels.
 
 :func:`device_sample_arrays` is :func:`virtus.data.labels.sample_arrays` for a rendering
-that stayed on the device (:class:`virtus.render.pipeline.DeviceRendering`). The
-pixel-centre ground truth (:class:`virtus.render.device.DeviceTruth`), the phase labels,
+that stayed on the device (:class:`virtus.render.renderer.DeviceRendering`). The
+pixel-centre ground truth (:class:`virtus.render.jit.tracing.DeviceTruth`), the phase labels,
 the modulation, the masks and the object ids are computed where the frames are, in the
 store's precision, and each array crosses to the host once, in its stored dtype, straight
 into its slot of the shard buffer. On a GPU this takes the labels (about 0.2 CPU-seconds of
@@ -11,8 +11,8 @@ to checksum and compress.
 
 The formulas are the host's, shared where they are not numpy-specific
 (:func:`virtus.data.labels.surface_distance`, the decoder's
-:func:`virtus.render.decode_jit.wrapped_phase_set` and
-:func:`~virtus.render.decode_jit.wrap_phase`). On ``llvm_ad_rgb`` the same code runs on the
+:func:`virtus.render.jit.decode.wrapped_phase_set` and
+:func:`~virtus.render.jit.decode.wrap_phase`). On ``llvm_ad_rgb`` the same code runs on the
 CPU, which is how the test suite checks it against :func:`sample_arrays`: masks, fringe
 orders and object ids are equal, the float64 phase and geometry labels agree to the
 stored precision, and the float32 modulation, numerator and denominator to float32
@@ -25,7 +25,6 @@ from typing import Any
 
 import numpy as np
 
-from virtus import phase as _phase
 from virtus.data.labels import (
     DIRECTION_LABELS,
     DIRECTIONS,
@@ -37,8 +36,9 @@ from virtus.data.labels import (
 )
 from virtus.data.sampling import SampleSpec
 from virtus.errors import VirtusError
-from virtus.render.decode_jit import FrameReader, wrap_phase, wrapped_phase_set
-from virtus.render.device import to_host
+from virtus.patterns import phase as _phase
+from virtus.render.jit.decode import FrameReader, wrap_phase, wrapped_phase_set
+from virtus.render.jit.tracing import to_host
 
 __all__ = ["device_sample_arrays"]
 
@@ -53,7 +53,7 @@ def device_sample_arrays(
 
     Parameters
     ----------
-    rendering : the sample's :class:`~virtus.render.pipeline.DeviceRendering` (traced with
+    rendering : the sample's :class:`~virtus.render.renderer.DeviceRendering` (traced with
         its ground truth: ``render_device`` keeps it).
     spec : its specification (scanner, objects, cam2world).
     layout : the store's arrays (:func:`virtus.data.labels.array_layout`).

@@ -121,8 +121,8 @@ class FringeDataset:
         return self._meta[self._position(item)]
 
     def rig(self, item: int) -> Any:
-        """The ``item``-th sample's :class:`virtus.devices.Rig` (triangulate with it)."""
-        from virtus.devices import Rig
+        """The ``item``-th sample's :class:`virtus.geometry.devices.Rig` (triangulate with it)."""
+        from virtus.geometry.devices import Rig
 
         return Rig.from_dict(self.meta(item)["rig"])
 

@@ -2,7 +2,7 @@
 
 :class:`Randomiser` turns a :class:`~virtus.data.config.DatasetConfig` into one
 :class:`SampleSpec` per sample index: a :class:`~virtus.scanner.Scanner` (rig, sensor,
-projector model, fringe sequence), a :class:`~virtus.scene.Scene` (objects, materials,
+projector model, fringe sequence), a :class:`~virtus.scene.model.Scene` (objects, materials,
 planes or a board, ambient light), ``cam2world``, the capture's noise seed, its split and
 a table of its objects.
 
@@ -42,9 +42,9 @@ import numpy as np
 
 from virtus.data.config import DatasetConfig, ObjectSource
 from virtus.errors import InputError
-from virtus.runs import atomic_write
-from virtus.sensor import MAX_SEED
-from virtus.transforms import Pose
+from virtus.geometry.transforms import Pose
+from virtus.io.runs import atomic_write
+from virtus.sensor.camera import MAX_SEED
 
 __all__ = ["ObjectRecord", "Randomiser", "SampleSpec", "build_rig", "candidate_sequences"]
 
@@ -149,7 +149,7 @@ class SampleSpec:
 
 def build_rig(config: DatasetConfig) -> Any:
     """The dataset's rig: ``rig.file`` or the paper's, resampled by the scales."""
-    from virtus.devices import Camera, Projector, Rig, default_rig
+    from virtus.geometry.devices import Camera, Projector, Rig, default_rig
 
     rig = Rig.load_json(config.rig_file) if config.rig_file else default_rig()
     if config.camera_scale != 1.0 or config.projector_scale != 1.0:
@@ -238,8 +238,8 @@ class Randomiser:
     """
 
     def __init__(self, config: DatasetConfig, assets_dir: str | Path) -> None:
-        from virtus.projection import load_projector
-        from virtus.sensor import load_sensor
+        from virtus.sensor.camera import load_sensor
+        from virtus.sensor.projector import load_projector
 
         self.config = config
         self.assets_dir = Path(assets_dir)
@@ -443,7 +443,7 @@ class Randomiser:
         return extra
 
     def _with_material(self, record: ObjectRecord, obj: Any, material: dict[str, Any]) -> tuple:
-        from virtus.scene import Material
+        from virtus.scene.model import Material
 
         new = obj.model_copy(update={"material": Material(**material)})
         return ObjectRecord(
@@ -454,7 +454,7 @@ class Randomiser:
         self, object_id: int, item: dict[str, Any], pose: Pose, rng: np.random.Generator
     ) -> tuple[ObjectRecord, Any]:
         """The scene object of an instance placed at ``pose`` (object2world)."""
-        from virtus.scene import BoxObject, Material, MeshObject, SphereObject
+        from virtus.scene.model import BoxObject, Material, MeshObject, SphereObject
 
         source: ObjectSource = self.config.sources[item["source"]]
         k = item["instance"]
@@ -495,7 +495,7 @@ class Randomiser:
     def _freeform_file(self, shape_seed: int, subdivisions: int) -> Path:
         """The free-form object of ``shape_seed`` as a binary STL in the assets folder
         (written atomically once; every writer writes the same bytes)."""
-        from virtus.objects import freeform_object
+        from virtus.scene.procedural import freeform_object
 
         path = self.assets_dir / f"freeform_{shape_seed}_s{subdivisions}.stl"
         if not path.is_file():
@@ -504,7 +504,7 @@ class Randomiser:
         return path
 
     def _planes(self, rng: np.random.Generator, first: int) -> list[tuple[ObjectRecord, Any]]:
-        from virtus.scene import Material, PlaneObject
+        from virtus.scene.model import Material, PlaneObject
 
         config = self.config
         count = int(rng.integers(config.plane_count[0], config.plane_count[1] + 1))
@@ -533,7 +533,7 @@ class Randomiser:
         }
 
     def _scene(self, objects: list[tuple[ObjectRecord, Any]], ambient: float) -> Any:
-        from virtus.scene import Scene
+        from virtus.scene.model import Scene
 
         return Scene(objects=tuple(obj for _, obj in objects), ambient=ambient)
 
@@ -550,7 +550,7 @@ def _board_texture(spec: str) -> np.ndarray:
 @functools.lru_cache(maxsize=256)
 def _mesh_bounds(path: str) -> tuple[np.ndarray, np.ndarray]:
     """(3,), (3,) bounding box of a mesh file, file units (read once per process)."""
-    from virtus.scene import MeshObject
+    from virtus.scene.model import MeshObject
 
     vertices = MeshObject(path=path).load()[0]
     return vertices.min(axis=0), vertices.max(axis=0)

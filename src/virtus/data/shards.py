@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from virtus.runs import atomic_write
+from virtus.io.runs import atomic_write
 
 __all__ = ["ShardEncoder"]
 

@@ -54,12 +54,12 @@ from typing import Any
 import numpy as np
 
 from virtus import __version__
-from virtus.capture import UNITS as CAPTURE_UNITS
+from virtus.capture.capture import UNITS as CAPTURE_UNITS
 from virtus.data.labels import ArraySpec, checksum_mismatches, sample_checksum
 from virtus.data.shards import ShardEncoder
 from virtus.errors import InputError, VirtusError
-from virtus.runs import config_digest, first_difference, write_json_atomic
-from virtus.safeio import read_json
+from virtus.io.runs import config_digest, first_difference, write_json_atomic
+from virtus.io.safeio import read_json
 
 __all__ = [
     "DESCRIPTION_FILE",
@@ -622,7 +622,7 @@ class DatasetStore:
 
     def _png_write(self, index: int, arrays: dict[str, np.ndarray], n_frames: int) -> None:
         """Write a sample folder beside its place, then rename it into place."""
-        from virtus.images import write_frames
+        from virtus.io.images import write_frames
 
         target = self._sample_dir(index)
         staging = target.parent / f".tmp-{target.name}"
@@ -636,8 +636,8 @@ class DatasetStore:
         os.replace(staging, target)
 
     def _png_read(self, index: int, spec: ArraySpec) -> np.ndarray:
-        from virtus.images import list_images, read_images
-        from virtus.safeio import load_npy
+        from virtus.io.images import list_images, read_images
+        from virtus.io.safeio import load_npy
 
         folder = self._sample_dir(index)
         if spec.name == "frames":

@@ -16,10 +16,10 @@ import trimesh
 
 from virtus.checks import as_points
 from virtus.errors import InputError
+from virtus.geometry.transforms import Pose
 from virtus.metrology.icp import IcpResult, icp_to_mesh
 from virtus.metrology.proximity import MeshIndex
 from virtus.metrology.stats import ErrorStats, error_stats
-from virtus.transforms import Pose
 
 __all__ = ["C2MResult", "cloud_to_mesh"]
 

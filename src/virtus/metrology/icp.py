@@ -20,8 +20,8 @@ from scipy.spatial.transform import Rotation
 
 from virtus.checks import as_points, as_rng, positive, positive_int
 from virtus.errors import InputError, VirtusError
+from virtus.geometry.transforms import Pose
 from virtus.metrology.proximity import ClosestPoints, MeshIndex
-from virtus.transforms import Pose
 
 __all__ = ["IcpResult", "icp_to_mesh"]
 
@@ -89,7 +89,7 @@ def icp_to_mesh(
     index = mesh if isinstance(mesh, MeshIndex) else MeshIndex(mesh)
     pose = Pose.identity() if init is None else init
     if not isinstance(pose, Pose):
-        raise InputError("init", "a virtus.transforms.Pose (cloud2mesh) or None", init)
+        raise InputError("init", "a virtus.geometry.transforms.Pose (cloud2mesh) or None", init)
     if max_distance is not None:
         max_distance = positive("max_distance", max_distance)
     max_iterations = positive_int("max_iterations", max_iterations)

@@ -14,10 +14,10 @@ and one realism setting, decodes it, and reports
 The table is written as ``ablation.csv`` and ``ablation.json`` and drawn as
 ``ablation.png`` (radius error and phase error per cell).
 
-Output directory (owned by the run through :func:`virtus.runs.claim_run`, command
+Output directory (owned by the run through :func:`virtus.io.runs.claim_run`, command
 ``ablation``)::
 
-    OUT/run.json, OUT/.virtus.lock        the run record and lock (see virtus.runs)
+    OUT/run.json, OUT/.virtus.lock        the run record and lock (see virtus.io.runs)
     OUT/cells/<material>-<ambient>-<realism>.json   one finished cell's row (written as soon as
                                           the cell is measured) and the run's config digest
     OUT/ablation.csv, ablation.json, ablation.png   the table, written at the end
@@ -42,16 +42,16 @@ from typing import Any
 import numpy as np
 
 from virtus.errors import InputError, VirtusError
+from virtus.io.runs import RunDirectory, claim_run, config_digest
+from virtus.io.safeio import read_json
 from virtus.pipeline.demo import sphere_roi_fit
 from virtus.pipeline.scan import EDGE_MAX_STEP, check_renderable, reconstruct
-from virtus.projection import PROJECTOR_PRESETS
 from virtus.reconstruct import depth_edge_mask
-from virtus.runs import RunDirectory, claim_run, config_digest
-from virtus.safeio import read_json
 from virtus.scanner import Scanner
-from virtus.sensor import SENSOR_PRESETS
+from virtus.sensor.camera import SENSOR_PRESETS
+from virtus.sensor.projector import PROJECTOR_PRESETS
 
-#: Sphere materials: (roughness, specular, metal) of :class:`virtus.scene.Material`.
+#: Sphere materials: (roughness, specular, metal) of :class:`virtus.scene.model.Material`.
 MATERIALS: dict[str, dict[str, Any]] = {
     "matte": {"roughness": 0.95, "specular": 0.15},
     "glossy": {"roughness": 0.3, "specular": 0.8},
@@ -118,7 +118,7 @@ def _choose(names: list[str] | None, table: dict[str, Any], what: str) -> list[s
 def sphere_scene(material: str, ambient: str) -> Any:
     """The demo's scene (100 mm sphere at 1 m before a wall) with this sphere material and
     ambient level."""
-    from virtus.scene import Material, Scene, SphereObject, default_scene
+    from virtus.scene.model import Material, Scene, SphereObject, default_scene
 
     base = default_scene()
     sphere = next(o for o in base.objects if isinstance(o, SphereObject))
@@ -130,7 +130,7 @@ def sphere_scene(material: str, ambient: str) -> Any:
 
 def run_cell(scanner: Scanner, cell: AblationCell, *, seed: int = 0) -> dict[str, Any]:
     """Render, decode and measure one cell (see the module docstring)."""
-    from virtus.scene import SphereObject
+    from virtus.scene.model import SphereObject
 
     scene = sphere_scene(cell.material, cell.ambient)
     configured = REALISM[cell.realism](scanner)
@@ -223,7 +223,7 @@ def run_ablation(
         is written).
     VirtusError : ``out_dir`` in use or holding another run's files.
     """
-    from virtus.sensor import as_seed
+    from virtus.sensor.camera import as_seed
 
     scanner = scanner or Scanner()
     cells = ablation_cells(materials, ambients, realism)

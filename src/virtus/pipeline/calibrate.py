@@ -4,7 +4,7 @@ or calibrate a real rig from its captures.
 :func:`calibrate_rig` is the library function behind ``virtus calibrate``;
 :func:`calibrate_captures` behind ``virtus calibrate --captures``, which runs the same
 detection (:func:`observe_pose`) and solver on captures made anywhere (a real bench through
-:func:`virtus.capture.import_capture`, or rendered), one capture of the whole sequence per
+:func:`virtus.capture.capture.import_capture`, or rendered), one capture of the whole sequence per
 board pose, and writes the same result files (no truth comparison: the truth is unknown).
 
 Rendered calibration:
@@ -22,7 +22,7 @@ Rendered calibration:
    pose set (boards all nearly parallel: :func:`check_pose_spread`) is refused before any
    pose is rendered, and again on the poses left usable for the solve.
 
-Output directory (``out_dir``; owned by the run through :func:`virtus.runs.claim_run`)::
+Output directory (``out_dir``; owned by the run through :func:`virtus.io.runs.claim_run`)::
 
     OUT/run.json             the run record: command, configuration, status, owned files, log
     OUT/.virtus.lock         the lock that keeps a second run out while this one runs
@@ -78,10 +78,10 @@ from virtus.calib.poses import BoardPose, check_pose, pose_set
 from virtus.calib.projector import local_homographies
 from virtus.calib.solve import MIN_POSES, PoseObservation, calibrate_observations
 from virtus.calib.truth import truth_error
-from virtus.capture import Capture
-from virtus.devices import Rig
+from virtus.capture.capture import Capture
 from virtus.errors import InputError, VirtusError
-from virtus.runs import (
+from virtus.geometry.devices import Rig
+from virtus.io.runs import (
     RunDirectory,
     atomic_write,
     atomic_write_files,
@@ -90,9 +90,9 @@ from virtus.runs import (
     directory_lock,
     write_json_atomic,
 )
-from virtus.safeio import load_npz, read_json
+from virtus.io.safeio import load_npz, read_json
 from virtus.scanner import Scanner
-from virtus.sensor import MAX_SEED, as_seed
+from virtus.sensor.camera import MAX_SEED, as_seed
 
 #: The paper's reported numbers (DESIGN.md section 4), for summaries.
 PAPER_RMS_PX = paper.RMS_PX
@@ -213,7 +213,7 @@ class CalibrationResult:
 
 def board_scene(board: Board, pose: BoardPose, texture: np.ndarray) -> Any:
     """The scene of one pose: the board as a textured plane (world = camera frame)."""
-    from virtus.scene import Scene, TexturedPlaneObject
+    from virtus.scene.model import Scene, TexturedPlaneObject
 
     plane = TexturedPlaneObject(size_m=board.plane_size_m, texture=texture, pose=pose.board2cam)
     return Scene(objects=[plane])
@@ -733,7 +733,7 @@ def capture_dirs(paths: list[str | Path]) -> list[Path]:
     ------
     InputError : a path that is neither, or no capture at all.
     """
-    from virtus.capture import MANIFEST
+    from virtus.capture.capture import MANIFEST
 
     out: list[Path] = []
     for item in paths:

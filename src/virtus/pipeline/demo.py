@@ -12,7 +12,7 @@
    inlier ratio, fit RMS; the same fit with the true rig is reported for reference;
 5. ``DIR/metrics.json`` (metrics, the config used, provenance) next to the paper's numbers.
 
-``DIR`` is owned by the run (:func:`virtus.runs.claim_run`, command ``demo``): another
+``DIR`` is owned by the run (:func:`virtus.io.runs.claim_run`, command ``demo``): another
 run's directory is refused unless ``overwrite``; ``resume`` continues an interrupted demo
 (finished calibration poses and a complete sphere capture are kept). ``DIR/calibration/``
 is the calibration job's own run directory (its ``run.json``), owned by the demo's run.
@@ -30,6 +30,7 @@ import numpy as np
 
 from virtus import paper
 from virtus.errors import VirtusError
+from virtus.io.runs import RunDirectory, claim_run
 from virtus.metrology import SphereFit, fit_sphere
 from virtus.pipeline.scan import (
     SCAN_LAYOUT,
@@ -40,7 +41,6 @@ from virtus.pipeline.scan import (
     reconstruct,
     scan_into,
 )
-from virtus.runs import RunDirectory, claim_run
 from virtus.scanner import Scanner
 
 __all__ = ["PAPER", "DemoConfig", "DemoResult", "run_demo", "sphere_roi_fit"]
@@ -182,7 +182,7 @@ def run_demo(
 def _run(run: RunDirectory, config: DemoConfig, scanner: Scanner, progress: Any) -> DemoResult:
     """The demo's steps inside its claimed directory (see :func:`run_demo`)."""
     from virtus.pipeline.calibrate import calibrate_rig
-    from virtus.scene import SphereObject, default_scene
+    from virtus.scene.model import SphereObject, default_scene
 
     root = run.path
     say = progress or (lambda *args: None)

@@ -17,14 +17,14 @@ from typing import Any
 
 import numpy as np
 
+from virtus.capture import scandir as layout
 from virtus.checks import as_points, positive
 from virtus.errors import VirtusError
+from virtus.geometry.transforms import Pose
+from virtus.io.ply import read_ply
+from virtus.io.runs import directory_lock, file_digest, write_json_atomic
 from virtus.metrology import C2MResult, cloud_to_mesh
-from virtus.pipeline import layout
 from virtus.pipeline.scan import check_points_current
-from virtus.ply import read_ply
-from virtus.runs import directory_lock, file_digest, write_json_atomic
-from virtus.transforms import Pose
 
 __all__ = ["MeshEvaluation", "evaluate_points", "evaluate_scan", "scene_meshes"]
 
@@ -61,7 +61,7 @@ def scene_meshes(scene: Any, world2cam: Pose | None = None) -> list[tuple[str, s
     """The mesh objects of a scene as ``(name, file, trimesh.Trimesh in the camera frame)``."""
     import trimesh
 
-    from virtus.scene import MeshObject
+    from virtus.scene.model import MeshObject
 
     out = []
     for name, obj in zip(scene.object_names(), scene.all_objects(), strict=True):
@@ -135,7 +135,7 @@ def evaluate_scan(
         The scene has no mesh object; the PLY is missing, not a PLY, empty or stale; the
         directory is in use by another run.
     """
-    from virtus.capture import Capture
+    from virtus.capture.capture import Capture
 
     directory = Path(scan_dir)
     capture = Capture.load(directory)

@@ -1,7 +1,7 @@
 """Scanning: capture -> decode -> reconstruct, on a capture directory or a scene.
 
 * :func:`decode_capture` decodes the frames of a capture directory into projector
-  coordinates and writes ``decoded/`` (see :mod:`virtus.pipeline.layout`).
+  coordinates and writes ``decoded/`` (see :mod:`virtus.capture.scandir`).
 * :func:`reconstruct_capture` triangulates them with the capture's rig or a calibration
   file and writes the point map and ``points.ply``.
 * :func:`scan` renders a scene with the true rig (the virtual sensor), saves the capture,
@@ -10,12 +10,12 @@
 Points are in the camera frame, metres. Reconstruction drops pixels next to depth
 discontinuities (mixed pixels at silhouettes; :func:`virtus.reconstruct.depth_edge_mask`).
 
-**Ownership.** :func:`scan` owns its output directory (:func:`virtus.runs.claim_run`,
+**Ownership.** :func:`scan` owns its output directory (:func:`virtus.io.runs.claim_run`,
 command ``scan``, :data:`SCAN_LAYOUT`): another run's directory is refused unless
 ``overwrite``, which removes that run's files first (its ``evaluation.json`` included);
 ``resume`` keeps a complete capture and redoes the fast steps. :func:`decode_capture` and
 :func:`reconstruct_capture` write derived files into a capture directory while holding its
-lock (:func:`virtus.runs.directory_lock`), so they cannot collide with a run writing it.
+lock (:func:`virtus.io.runs.directory_lock`), so they cannot collide with a run writing it.
 
 **Derived files are tied to their inputs.** ``decoded/source.json`` holds the capture's
 checksum (:func:`frames_checksum`) and the decode options; ``reconstruction/source.json``
@@ -38,22 +38,15 @@ from typing import Any
 
 import numpy as np
 
-from virtus.capture import LAYOUT as CAPTURE_LAYOUT
-from virtus.capture import MANIFEST, Capture, check_capture_bytes
-from virtus.devices import Rig
+from virtus.capture import scandir as layout
+from virtus.capture.capture import LAYOUT as CAPTURE_LAYOUT
+from virtus.capture.capture import MANIFEST, Capture, check_capture_bytes
 from virtus.errors import InputError, VirtusError
-from virtus.jsonio import write_json
-from virtus.patterns import DecodeResult
-from virtus.pipeline import layout
-from virtus.ply import write_ply
-from virtus.reconstruct import (
-    Use,
-    depth_edge_mask,
-    normals_from_points,
-    points_from_decoded,
-    valid_points,
-)
-from virtus.runs import (
+from virtus.geometry.devices import Rig
+from virtus.geometry.transforms import Pose
+from virtus.io.jsonio import write_json
+from virtus.io.ply import write_ply
+from virtus.io.runs import (
     RunDirectory,
     atomic_write,
     atomic_write_files,
@@ -63,9 +56,16 @@ from virtus.runs import (
     file_digest,
     write_json_atomic,
 )
-from virtus.safeio import load_npy, read_json
+from virtus.io.safeio import load_npy, read_json
+from virtus.patterns import DecodeResult
+from virtus.reconstruct import (
+    Use,
+    depth_edge_mask,
+    normals_from_points,
+    points_from_decoded,
+    valid_points,
+)
 from virtus.scanner import Scanner
-from virtus.transforms import Pose
 
 __all__ = [
     "DERIVED_FILES",
@@ -132,7 +132,7 @@ class ScanSettings:
 
     def __post_init__(self) -> None:
         from virtus.checks import positive
-        from virtus.sensor import as_seed
+        from virtus.sensor.camera import as_seed
 
         if self.use not in ("uv", "u", "v"):
             raise InputError("use", "'uv', 'u' or 'v'", self.use)
@@ -313,9 +313,9 @@ def check_renderable(scanner: Scanner, scene: Any = None, cam2world: Pose | None
     """Everything the renderer would refuse only after a job started, checked before it
     claims or renders anything; returns the bytes one capture needs.
 
-    The memory (:func:`virtus.capture.capture_bytes`: frames plus the trace's ``spp x
+    The memory (:func:`virtus.capture.capture.capture_bytes`: frames plus the trace's ``spp x
     bounces x aperture samples`` taps per pixel) against
-    :data:`virtus.capture.MAX_CAPTURE_BYTES`; spp a perfect square; the Mitsuba variant's
+    :data:`virtus.capture.capture.MAX_CAPTURE_BYTES`; spp a perfect square; the Mitsuba variant's
     name; the light-transport counts; and, given a ``scene``, that every object lies in
     front of the camera placed at ``cam2world``.
     """
@@ -435,7 +435,7 @@ def decode_capture(
     Parameters
     ----------
     capture_dir : a capture directory (``virtus capture``, ``virtus import``, a scan).
-    save : write ``decoded/`` (see :mod:`virtus.pipeline.layout`) with ``summary.json``
+    save : write ``decoded/`` (see :mod:`virtus.capture.scandir`) with ``summary.json``
         and ``source.json`` (the capture's checksum and these options), holding the
         directory's lock.
     min_modulation : fringe modulation threshold, a fraction of the capture's full scale.
@@ -635,8 +635,8 @@ def scan(
 
     Parameters
     ----------
-    scene : a :class:`virtus.scene.Scene`, or the name of a built-in scene
-        (:data:`virtus.pipeline.scenes.BUILTIN_SCENES`; its assets are written into the
+    scene : a :class:`virtus.scene.model.Scene`, or the name of a built-in scene
+        (:data:`virtus.scene.builtin.BUILTIN_SCENES`; its assets are written into the
         run's directory).
     out_dir : scan directory, owned by the run (``run.json``, lock, :data:`SCAN_LAYOUT`).
     scanner : the virtual scanner (its rig is the truth that renders the frames; default:
@@ -655,7 +655,7 @@ def scan(
         baseline, or a capture over the memory budget -- all before anything is written;
         ``out_dir`` in use or holding another run's files; no decoded pixel or no point.
     """
-    from virtus.pipeline.scenes import BUILTIN_SCENES
+    from virtus.scene.builtin import BUILTIN_SCENES
 
     settings = settings or ScanSettings()
     scanner = scanner or Scanner()
@@ -681,7 +681,7 @@ def scan(
 
 def builtin_scene_in_run(run: RunDirectory, name: str) -> Any:
     """A built-in scene whose asset files (``freeform.stl``) the run owns."""
-    from virtus.pipeline.scenes import builtin_scene
+    from virtus.scene.builtin import builtin_scene
 
     if name == "freeform":
         run.own("freeform.stl")
@@ -739,7 +739,7 @@ def capture_job(
     resume: bool = False,
 ) -> Capture:
     """Run a job that writes one capture into ``out_dir`` (``virtus capture``, ``virtus
-    import``): claim the directory (:func:`virtus.runs.claim_run` with ``command``,
+    import``): claim the directory (:func:`virtus.io.runs.claim_run` with ``command``,
     ``config``, ``inputs`` and :data:`SCAN_LAYOUT`), call ``make()`` for the capture and
     save it (:func:`save_capture`). A resumed run keeps a complete capture and returns it.
     Check every input before calling: nothing may fail between the claim and ``make``."""

@@ -12,10 +12,10 @@ its points are mapped back into the object frame by the known turntable pose
 are concatenated into one cloud. The merged cloud is then compared with the mesh by C2M
 (after a global ICP, as for a single view).
 
-Output directory (owned by the run through :func:`virtus.runs.claim_run`, command
+Output directory (owned by the run through :func:`virtus.io.runs.claim_run`, command
 ``turntable``)::
 
-    OUT/run.json, OUT/.virtus.lock   the run record and lock (see virtus.runs)
+    OUT/run.json, OUT/.virtus.lock   the run record and lock (see virtus.io.runs)
     OUT/view_<k>/               view k: a scan directory (capture, decoded/, points.ply, ...)
     OUT/view_<k>/view.npz       view k's result, written when the view is finished:
                                 points (N, 3) float64 object frame, metres (after the box
@@ -40,8 +40,12 @@ from typing import Any
 import numpy as np
 
 from virtus.checks import positive, positive_int
-from virtus.devices import Rig
 from virtus.errors import InputError, VirtusError
+from virtus.geometry.devices import Rig
+from virtus.geometry.transforms import Pose
+from virtus.io.ply import write_ply
+from virtus.io.runs import RunDirectory, claim_run, config_digest
+from virtus.io.safeio import load_npz
 from virtus.metrology import C2MResult, MeshIndex, cloud_to_mesh, icp_to_mesh
 from virtus.pipeline.scan import (
     ScanSettings,
@@ -49,12 +53,8 @@ from virtus.pipeline.scan import (
     check_renderable,
     scan_into,
 )
-from virtus.pipeline.scenes import FREEFORM_CENTRE_M
-from virtus.ply import write_ply
-from virtus.runs import RunDirectory, claim_run, config_digest
-from virtus.safeio import load_npz
 from virtus.scanner import Scanner
-from virtus.transforms import Pose
+from virtus.scene.builtin import FREEFORM_CENTRE_M
 
 __all__ = ["TurntableResult", "turntable_poses", "turntable_scan"]
 
@@ -81,7 +81,7 @@ def turntable_poses(n_views: int, start: Pose | None = None) -> list[Pose]:
     n_views : number of views (>= 1).
     start : object2cam of view 0; the turntable axis (parallel to the camera's y axis)
         passes through its translation, the object's origin. Default: no rotation, origin at
-        :data:`~virtus.pipeline.scenes.FREEFORM_CENTRE_M`.
+        :data:`~virtus.scene.builtin.FREEFORM_CENTRE_M`.
     """
     n = positive_int("n_views", n_views)
     start = start or Pose(np.eye(3), FREEFORM_CENTRE_M)
@@ -160,7 +160,7 @@ def turntable_scan(
     Parameters
     ----------
     mesh_path : the object's mesh file (STL/OBJ/PLY); its frame is the object frame. None:
-        the built-in free-form object (:func:`virtus.objects.freeform_object`, metres),
+        the built-in free-form object (:func:`virtus.scene.procedural.freeform_object`, metres),
         written as ``out_dir/freeform.stl``.
     out_dir : directory owned by the run (layout in the module docstring).
     n_views : number of turntable angles, 1..:data:`MAX_VIEWS`.
@@ -179,7 +179,7 @@ def turntable_scan(
         over the memory budget (all before anything is written); ``out_dir`` in use or
         holding another run's files; no view that saw the object.
     """
-    from virtus.scene import MeshObject, Scene
+    from virtus.scene.model import MeshObject, Scene
 
     settings = settings or ScanSettings()
     scanner = scanner or Scanner()
@@ -188,7 +188,7 @@ def turntable_scan(
     used = calibration_rig(calibration, scanner)
     poses = turntable_poses(n_views, start)
     if mesh_path is None:
-        from virtus.objects import freeform_object
+        from virtus.scene.procedural import freeform_object
 
         built = freeform_object()
         vertices, faces = np.asarray(built.vertices), np.asarray(built.faces)
@@ -236,7 +236,7 @@ def _run_views(
     settings: ScanSettings,
     refine: bool,
 ) -> TurntableResult:
-    from virtus.scene import MeshObject, Scene
+    from virtus.scene.model import MeshObject, Scene
 
     index = MeshIndex(mesh)
     low, high = mesh.bounds[0] - _BOX_MARGIN_M, mesh.bounds[1] + _BOX_MARGIN_M

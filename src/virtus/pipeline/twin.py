@@ -2,7 +2,8 @@
 captures it was calibrated from.
 
 :func:`write_twin` is ``virtus twin CALIB --out DIR``: ``DIR/rig.json`` (the rig schema),
-``DIR/isaac.json`` (:func:`virtus.twin.twin_parameters`: USD lens and film values in tenths
+``DIR/isaac.json`` (:func:`virtus.twin.parameters.twin_parameters`: USD lens and film values in
+tenths
 of a scene unit, ``metersPerUnit``, Omniverse lens-distortion attributes, the projector's
 RectLight size and both poses in Isaac's world) and, with usd-core, ``DIR/twin.usda``.
 
@@ -33,10 +34,12 @@ import numpy as np
 from virtus.calib.board import Board, board_from_dict, board_from_spec
 from virtus.calib.io import load_calibration
 from virtus.calib.poses import BoardPose
-from virtus.capture import Capture
-from virtus.devices import Rig
+from virtus.capture.capture import Capture
 from virtus.errors import InputError, VirtusError
-from virtus.jsonio import write_json
+from virtus.geometry.devices import Rig
+from virtus.geometry.transforms import Pose
+from virtus.io.jsonio import write_json
+from virtus.io.safeio import read_json
 from virtus.pipeline.calibrate import (
     BOARD_BLUR_M,
     BOARD_TEXEL_M,
@@ -46,11 +49,9 @@ from virtus.pipeline.calibrate import (
     observe_pose,
 )
 from virtus.reconstruct import points_from_decoded
-from virtus.safeio import read_json
 from virtus.scanner import Scanner
-from virtus.sensor import Sensor
-from virtus.transforms import Pose
-from virtus.twin import DEFAULT_PIXEL_SIZE_M, twin_parameters
+from virtus.sensor.camera import Sensor
+from virtus.twin.parameters import DEFAULT_PIXEL_SIZE_M, twin_parameters
 
 #: Border of the board plane (fraction of its size per side) left out of the comparisons:
 #: pixels straddling the board's edge mix board and background and belong to neither.
@@ -87,7 +88,7 @@ def write_twin(
     params["source"] = str(calibration)
     written["isaac"] = write_json(out / ISAAC_FILE, params)
     try:
-        from virtus.usd import export_usd
+        from virtus.twin.usd import export_usd
 
         written["usd"] = export_usd(
             out / USD_FILE, rig=rig, meters_per_unit=meters_per_unit, pixel_size_m=pixel_size_m

@@ -1,8 +1,8 @@
-"""Turn a :class:`virtus.scene.Scene` into a Mitsuba scene description.
+"""Turn a :class:`virtus.scene.model.Scene` into a Mitsuba scene description.
 
 Shapes are placed in the world frame given by their ``object2world`` poses; every BSDF is
 wrapped in ``twosided`` so that planes and open meshes reflect on both sides. Materials map
-to Mitsuba BSDFs as documented in :class:`virtus.scene.Material`. Scene lights become
+to Mitsuba BSDFs as documented in :class:`virtus.scene.model.Material`. Scene lights become
 Mitsuba emitters: an area light a black ``rectangle`` with an ``area`` emitter (radiance on
 its local +z side), the environment a ``constant`` emitter.
 """
@@ -15,7 +15,8 @@ from typing import Any
 import numpy as np
 
 from virtus.errors import InputError
-from virtus.scene import (
+from virtus.geometry.transforms import Pose
+from virtus.scene.model import (
     AreaLight,
     BoxObject,
     EnvironmentLight,
@@ -26,7 +27,6 @@ from virtus.scene import (
     SphereObject,
     TexturedPlaneObject,
 )
-from virtus.transforms import Pose
 
 #: Textures made from in-memory images, most recent last: ``(variant, image, copy,
 #: texture)``. A calibration renders one board image in every pose; building its Mitsuba

@@ -10,7 +10,8 @@ square pixels and no distortion; the scene must have no ambient light.
 Frames: Mitsuba's camera/emitter local frame looks down +z with +x left and +y up, so an
 OpenCV-frame pose maps to it through ``diag(-1, -1, 1)``; the projector texture's uv of
 pixel ``j`` is ``(j + 0.5) / W``, which is the pixel-centre convention of
-:mod:`virtus.optics`. Mitsuba's projector texture value is the irradiance on its image plane
+:mod:`virtus.geometry.optics`. Mitsuba's projector texture value is the irradiance on its image
+plane
 at z = 1 (uniform per pixel), the same model as :mod:`virtus.render.tracing`, so the two
 renderers output radiance in the same units.
 """
@@ -23,14 +24,14 @@ from typing import Any
 import numpy as np
 
 from virtus.checks import positive_int
-from virtus.devices import Rig
 from virtus.errors import InputError
-from virtus.optics import Intrinsics
+from virtus.geometry.devices import Rig
+from virtus.geometry.optics import Intrinsics
+from virtus.geometry.transforms import Pose
 from virtus.render.backend import mitsuba
 from virtus.render.mitsuba_scene import scene_dict
 from virtus.render.synthesis import LOOKUPS
-from virtus.scene import Scene
-from virtus.transforms import Pose
+from virtus.scene.model import Scene
 
 #: Principal points and focal lengths must match Mitsuba's ideal frustum this closely (px).
 _CENTRE_TOL_PX = 1e-9

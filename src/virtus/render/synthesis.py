@@ -11,16 +11,16 @@ one direction this is one sparse (pixels x projector columns) matrix times a den
 (columns x frames) profile matrix.
 
 The profile of a frame is the light the projector emits
-(:meth:`virtus.projection.ProjectorModel.emitted_profile`: pre-compensation, response, black
+(:meth:`virtus.sensor.projector.ProjectorModel.emitted_profile`: pre-compensation, response, black
 level); the projector's fall-off scales each tap's weight. Pixel models
-(:class:`virtus.projection.Lookup`):
+(:class:`virtus.sensor.projector.Lookup`):
 
 * ``"nearest"``: the DMD pixel containing the point, ``floor(c + 0.5)`` (pixel j covers
   [j - 0.5, j + 0.5)); this is the physical staircase of a DMD.
 * ``"bilinear"``: linear interpolation between projector pixel centres, clamped to the edge
   pixels' values in the outer half pixel.
 * ``"psf"``: linear interpolation in the profile spread by the pixel aperture and lens PSF,
-  tabulated at several points per pixel (:meth:`~virtus.projection.ProjectorModel.spread`).
+  tabulated at several points per pixel (:meth:`~virtus.sensor.projector.ProjectorModel.spread`).
 """
 
 from __future__ import annotations
@@ -35,10 +35,10 @@ import scipy.sparse
 
 from virtus.checks import positive_int
 from virtus.errors import InputError
-from virtus.projection import Lookup, ProjectorModel
 from virtus.render.tracing import Trace
+from virtus.sensor.projector import Lookup, ProjectorModel
 
-#: The projector pixel models (:class:`virtus.projection.Lookup`).
+#: The projector pixel models (:class:`virtus.sensor.projector.Lookup`).
 LOOKUPS = tuple(member.value for member in Lookup)
 #: Pixels per block of the sparse product: (block x frames) float32 fits in L2 cache.
 _BLOCK_PIXELS = 1 << 14
@@ -155,7 +155,7 @@ def emitted_profiles(
 def tap_weights(trace: Any, projector: ProjectorModel, intrinsics: Any | None) -> Any:
     """Tap weights with the projector's fall-off applied: (P, S) float32 of a host
     :class:`Trace`, or the Float (P * S,) of a device trace
-    (:class:`virtus.render.device.DeviceTrace`; the fall-off is plain arithmetic)."""
+    (:class:`virtus.render.jit.tracing.DeviceTrace`; the fall-off is plain arithmetic)."""
     if projector.falloff == "none":
         return trace.weight
     if intrinsics is None:
@@ -182,7 +182,7 @@ def synthesize(
     sequence : a pattern sequence (``virtus.patterns``): ``frames[i].direction`` in
         {"v", "h", None} and ``profile(i)`` -> (L,) values in [0, 1] along the varying axis
         (L = projector width for "v", height for "h", 1 for uniform frames).
-    projector : the projector model (:class:`virtus.projection.ProjectorModel`), or just a
+    projector : the projector model (:class:`virtus.sensor.projector.ProjectorModel`), or just a
         pixel model name for an otherwise ideal projector (``"nearest"``: DMD pixels).
     transform : optional pointwise function ``transform(block, frames, pixels)`` applied to
         each block of radiance before it is stored (e.g. a sensor's digitisation), where

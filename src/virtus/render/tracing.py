@@ -12,7 +12,7 @@ Model
 * Camera rays come from ``rig.camera.intrinsics.unproject`` (any principal point, lens
   distortion) at ``spp = s * s`` stratified positions per pixel: an s x s grid at offsets
   ``(i + 0.5) / s - 0.5`` px, whose centroid is the pixel centre (2 x 2: +-0.25 px).
-* Camera depth of field (``camera_lens``, a :class:`~virtus.optics.ThinLens`): the pinhole
+* Camera depth of field (``camera_lens``, a :class:`~virtus.geometry.optics.ThinLens`): the pinhole
   ray of a supersample meets the focus plane z = d_f (camera frame) at F; the ray starts
   instead at a point a of the aperture disk (diameter A, in the plane z = 0) and goes
   toward F. The pixel's spp aperture points are stratified (one per equal-area annulus, at
@@ -54,7 +54,7 @@ Model
   With ``bounces=1`` and no lenses the pass is the single-bounce pinhole one, bit for bit.
 * Ambient light: ``L_amb = scene.ambient * rho_d`` with ``rho_d`` Mitsuba's diffuse
   reflectance of the camera hit (no occlusion), plus the scene's ``lights`` (area lights and
-  an environment, see :class:`virtus.scene.Scene`): next-event estimation toward them at every
+  an environment, see :class:`virtus.scene.model.Scene`): next-event estimation toward them at every
   path vertex with the same paths (visibility included), and the emitters the camera rays
   see directly. It is pattern-independent and goes into ``Trace.ambient``.
 * Ground truth uses one extra pinhole ray through each pixel centre (lenses do not move
@@ -73,15 +73,15 @@ from typing import Any
 
 import numpy as np
 
+from virtus.capture.groundtruth import GroundTruth
 from virtus.checks import positive_int
-from virtus.devices import Rig
 from virtus.errors import InputError
-from virtus.groundtruth import GroundTruth
-from virtus.optics import Intrinsics, ThinLens
+from virtus.geometry.devices import Rig
+from virtus.geometry.optics import Intrinsics, ThinLens
+from virtus.geometry.transforms import Pose
 from virtus.render.backend import mitsuba
 from virtus.render.mitsuba_scene import check_in_front, scene_dict
-from virtus.scene import Scene
-from virtus.transforms import Pose
+from virtus.scene.model import Scene
 
 #: Rays traced per Mitsuba call: bounds memory (~100 B per ray inside Dr.Jit).
 _RAYS_PER_CHUNK = 1 << 23
@@ -214,7 +214,7 @@ def _inside(u: np.ndarray, v: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
 
 def _check_lens(name: str, lens: object) -> ThinLens | None:
     if lens is not None and not isinstance(lens, ThinLens):
-        raise InputError(name, "a virtus.optics.ThinLens or None", type(lens).__name__)
+        raise InputError(name, "a virtus.geometry.optics.ThinLens or None", type(lens).__name__)
     return lens
 
 
@@ -479,7 +479,7 @@ class _Tracer:
 @dataclass(frozen=True, eq=False)
 class Pass:
     """One pose's checked tracing settings and its Mitsuba scene: what :func:`trace` and
-    the device-resident :func:`virtus.render.device.trace_device` share."""
+    the device-resident :func:`virtus.render.jit.tracing.trace_device` share."""
 
     rig: Rig
     scene: Scene
@@ -589,9 +589,9 @@ def prepare_pass(
     """Check the settings of :func:`trace` (same parameters) and load the scene into
     Mitsuba."""
     if not isinstance(rig, Rig):
-        raise InputError("rig", "a virtus.devices.Rig", type(rig).__name__)
+        raise InputError("rig", "a virtus.geometry.devices.Rig", type(rig).__name__)
     if not isinstance(scene, Scene):
-        raise InputError("scene", "a virtus.scene.Scene", type(scene).__name__)
+        raise InputError("scene", "a virtus.scene.model.Scene", type(scene).__name__)
     cam2world = Pose.identity() if cam2world is None else cam2world
     offsets = sample_offsets(spp)
     spp = len(offsets)

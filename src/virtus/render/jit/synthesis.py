@@ -1,12 +1,13 @@
 """Frame synthesis and digitisation on the device: the model of
-:mod:`virtus.render.synthesis` and :class:`virtus.sensor.Sensor` on Dr.Jit arrays.
+:mod:`virtus.render.synthesis` and :class:`virtus.sensor.camera.Sensor` on Dr.Jit arrays.
 
 One kernel makes a whole pose's frames: lane ``i`` is pixel ``p = i mod P`` of frame
 ``f = i div P``; it reads its S taps (weight, projector coordinate), looks each up in frame
 ``f``'s row of one table holding every frame's emitted profile (uniform frames: one entry),
 sums them, adds the ambient light, and digitises with the sensor -- its noise drawn from the
-same counter-based streams as on the host (:mod:`virtus.render.sensor_jit`). Only the
-digital frames are written, into one device array (:class:`~virtus.render.device.DeviceFrames`).
+same counter-based streams as on the host (:mod:`virtus.render.jit.noise`). Only the
+digital frames are written, into one device array
+(:class:`~virtus.render.jit.tracing.DeviceFrames`).
 Frames are split into several kernels only when a pose has more than
 :data:`_MAX_LANES` pixels x frames.
 """
@@ -18,12 +19,12 @@ from typing import Any
 import numpy as np
 
 from virtus.errors import InputError
-from virtus.projection import Lookup, ProjectorModel
-from virtus.render.device import DeviceFrames, DeviceTrace
-from virtus.render.sensor_jit import noise_streams
+from virtus.render.jit.noise import noise_streams
+from virtus.render.jit.tracing import DeviceFrames, DeviceTrace
 from virtus.render.synthesis import as_projector, emitted_profiles, projector_groups, tap_weights
 from virtus.render.tracing import Trace
-from virtus.sensor import Sensor
+from virtus.sensor.camera import Sensor
+from virtus.sensor.projector import Lookup, ProjectorModel
 
 #: Most lanes (pixels x frames) per kernel: UInt32 lane indices, bounded temporaries.
 _MAX_LANES = 1 << 28
@@ -71,7 +72,7 @@ def synthesize_on_device(
 
     Parameters
     ----------
-    trace : the pose's taps (:func:`virtus.render.device.trace_device`).
+    trace : the pose's taps (:func:`virtus.render.jit.tracing.trace_device`).
     sequence : the pattern sequence.
     projector : the projector model, or a pixel model name.
     sensor : the camera sensor; a noisy one draws the host's counter-based streams.

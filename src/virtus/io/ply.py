@@ -23,7 +23,7 @@ import numpy as np
 
 from virtus.checks import as_float_array, as_points
 from virtus.errors import InputError, VirtusError
-from virtus.safeio import check_file
+from virtus.io.safeio import check_file
 
 __all__ = ["PlyError", "PointCloud", "read_ply", "write_ply"]
 

@@ -3,7 +3,7 @@
 A :class:`PatternSequence` is one object that encodes itself (:meth:`~PatternSequence.profile`,
 :meth:`~PatternSequence.image`, :meth:`~PatternSequence.images`: what the projector shows)
 and decodes camera images of itself (:meth:`~PatternSequence.decode`, math in
-:mod:`virtus.phase`). Each frame is a :class:`Frame` (one record of plain fields); the
+:mod:`virtus.patterns.phase`). Each frame is a :class:`Frame` (one record of plain fields); the
 codings behind them, :class:`PhaseCoding` and :class:`BitCode`, encode and decode
 themselves. Sequences are read from and written to a description file (below).
 
@@ -132,10 +132,10 @@ from typing import Any
 
 import numpy as np
 
-from virtus import phase as _phase
 from virtus.checks import finite, positive, positive_int
 from virtus.errors import InputError, VirtusError
-from virtus.jsonio import write_json
+from virtus.io.jsonio import write_json
+from virtus.patterns import phase as _phase
 
 __all__ = [
     "CODE_FLAG_RAD",
@@ -757,7 +757,7 @@ class PatternSequence:
     def plans(self) -> dict[str, DecodePlan]:
         """Direction -> how it decodes (:class:`DecodePlan`), for the directions present:
         what :meth:`decode` follows, and any other decoder of these frames (the device
-        decoder, :mod:`virtus.render.decode_jit`)."""
+        decoder, :mod:`virtus.render.jit.decode`)."""
         return dict(self._plans)
 
     def plan(self, direction: str) -> DecodePlan | None:
@@ -1163,7 +1163,7 @@ class PatternSequence:
         """The :class:`DecodeResult` of per-direction decodes (``out[d]``: ``phase`` NaN
         where invalid, ``valid``, ``flags`` within it, ``modulation``; every direction of
         :data:`DIRECTIONS`), warning when many pixels are flagged. Shared by the host
-        decoder and the device decoder's :meth:`virtus.render.decode_jit.DeviceDecode.to_host`."""
+        decoder and the device decoder's :meth:`virtus.render.jit.decode.DeviceDecode.to_host`."""
         shape = out["v"]["valid"].shape
         mask = np.full(shape, bool(self.directions))  # no fringes: nothing is valid
         for direction in self.directions:
@@ -1622,7 +1622,8 @@ def heterodyne_sequence(
     fringes over 1152 px) of 6 steps in both directions plus white and black: 38 frames.
 
     The finest period is the one decoded; its beats with the others (1152 px and 144 px by
-    default) must include one that covers each axis. See :func:`virtus.phase.unwrap_heterodyne`.
+    default) must include one that covers each axis. See
+    :func:`virtus.patterns.phase.unwrap_heterodyne`.
     """
     if np.ndim(periods) != 1 or len(periods) < 2:
         raise InputError("periods", "two or more periods", periods)

@@ -4,7 +4,7 @@
 the camera rays are uploaded once per camera and kept on the device, the taps of every
 Mitsuba call are written straight into device arrays, and the pixel-centre ground truth is
 computed only when asked for (:meth:`DeviceTrace.ground_truth`). The frames synthesised
-from it (:func:`virtus.render.synthesis_jit.synthesize_on_device`) are one device array,
+from it (:func:`virtus.render.jit.synthesis.synthesize_on_device`) are one device array,
 copied to the host in one transfer (:meth:`DeviceFrames.numpy`) or handed to PyTorch
 without a copy (:meth:`DeviceFrames.torch`, DLPack).
 
@@ -26,9 +26,10 @@ from typing import Any
 
 import numpy as np
 
-from virtus.devices import Rig
-from virtus.groundtruth import GroundTruth
-from virtus.optics import Intrinsics, ThinLens
+from virtus.capture.groundtruth import GroundTruth
+from virtus.geometry.devices import Rig
+from virtus.geometry.optics import Intrinsics, ThinLens
+from virtus.geometry.transforms import Pose
 from virtus.render.backend import mitsuba, variant_of
 from virtus.render.tracing import (
     Pass,
@@ -38,8 +39,7 @@ from virtus.render.tracing import (
     prepare_pass,
     project_normalized,
 )
-from virtus.scene import Scene
-from virtus.transforms import Pose
+from virtus.scene.model import Scene
 
 __all__ = ["DeviceFrames", "DeviceTrace", "DeviceTruth", "to_host", "trace_device"]
 
@@ -56,7 +56,7 @@ class DeviceTruth:
         frame, toward the camera; NaN where nothing is hit.
     proj_uv : two Float64 (P,) projector pixel coordinates (distortion applied); NaN where
         nothing is hit or the point is behind the projector.
-    hit, shadow, outside : Bool (P,), as :class:`virtus.groundtruth.GroundTruth`'s masks.
+    hit, shadow, outside : Bool (P,), as :class:`virtus.capture.groundtruth.GroundTruth`'s masks.
     """
 
     points: tuple[Any, Any, Any]
@@ -72,7 +72,7 @@ class DeviceTruth:
         return self.hit & ~self.shadow & ~self.outside
 
     def to_host(self, height: int, width: int, multibounce: Any) -> GroundTruth:
-        """The host :class:`~virtus.groundtruth.GroundTruth` (float64, one transfer per
+        """The host :class:`~virtus.capture.groundtruth.GroundTruth` (float64, one transfer per
         array), ``mask_multibounce`` from ``multibounce`` (Bool (P,))."""
         mi, _ = _modules_of(self.hit)
         image = (height, width)

@@ -7,7 +7,7 @@ col``); its type is ``UInt8`` (8-bit sensors), ``UInt32`` (deeper sensors) or ``
 :func:`decode_on_device` vectorises over the ``P`` pixels and unrolls the frames in Python,
 so one decode is one fused kernel; it follows the sequence's own plan
 (:meth:`~virtus.patterns.PatternSequence.plans`: phase sets, code frames per bit, unwrapping
-method) and the formulas of :mod:`virtus.phase` step by step.
+method) and the formulas of :mod:`virtus.patterns.phase` step by step.
 :meth:`DeviceDecode.to_host` brings the result back in one transfer as the host's
 :class:`~virtus.patterns.DecodeResult`, optionally finishing with the host's neighbour check.
 
@@ -39,7 +39,6 @@ from typing import Any
 
 import numpy as np
 
-from virtus import phase as _phase
 from virtus.checks import finite, positive, positive_int
 from virtus.errors import InputError, VirtusError
 from virtus.patterns import (
@@ -52,6 +51,7 @@ from virtus.patterns import (
     DecodeResult,
     PatternSequence,
 )
+from virtus.patterns import phase as _phase
 from virtus.render.backend import mitsuba, variant_of
 
 __all__ = ["DeviceDecode", "decode_on_device", "frames_to_device", "supports"]

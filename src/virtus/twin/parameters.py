@@ -6,19 +6,19 @@ description (:func:`twin_parameters`) holds
 
 * the stage units: ``metersPerUnit`` (stated; lengths of poses and lights are in scene
   units) and ``upAxis`` Z;
-* the camera: USD lens and film values in tenths of a scene unit (:mod:`virtus.isaac`) for
+* the camera: USD lens and film values in tenths of a scene unit (:mod:`virtus.geometry.isaac`) for
   a stated pixel pitch, the OpenCV calibration in pixels, and Omniverse's
   ``OmniLensDistortionOpenCvPinholeAPI`` attributes (``omni:lensdistortion:opencvPinhole:*``),
   which render fx != fy and distortion exactly;
 * the projector as Isaac models it: a ``UsdLux.RectLight`` whose width and height are the
   projected image's size at 1 m from the inverse camera model
-  (:func:`virtus.devices.projected_size`), with its OpenCV calibration;
+  (:func:`virtus.geometry.devices.projected_size`), with its OpenCV calibration;
 * both poses in Isaac's world: the camera at the origin looking along +X with +Z up
-  (:data:`virtus.isaac.CV_TO_ISAAC_WORLD`); a prim's transform maps its USD-local frame
+  (:data:`virtus.geometry.isaac.CV_TO_ISAAC_WORLD`); a prim's transform maps its USD-local frame
   (looking along -Z, +Y up) to the world, ``prim2world = device2world diag(1, -1, -1)``.
   Quaternions are written ``(w, x, y, z)`` as ``Gf.Quatd``.
 
-This module needs no USD library; :mod:`virtus.usd` writes the same values into a stage.
+This module needs no USD library; :mod:`virtus.twin.usd` writes the same values into a stage.
 """
 
 from __future__ import annotations
@@ -30,10 +30,10 @@ from scipy.spatial.transform import Rotation
 
 from virtus import paper
 from virtus.checks import positive
-from virtus.devices import Rig, projected_size
-from virtus.isaac import CV_TO_ISAAC_WORLD, CV_TO_USD_CAMERA, usd_camera_params
-from virtus.optics import Intrinsics
-from virtus.transforms import Pose
+from virtus.geometry.devices import Rig, projected_size
+from virtus.geometry.isaac import CV_TO_ISAAC_WORLD, CV_TO_USD_CAMERA, usd_camera_params
+from virtus.geometry.optics import Intrinsics
+from virtus.geometry.transforms import Pose
 
 #: Default pixel pitch (m) of the twin's USD camera: the paper's, 20.9995 mm / 960 px, so
 #: the paper's camera reads focal length 50 mm and aperture 20.9995 mm as in its Isaac

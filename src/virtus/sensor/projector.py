@@ -33,7 +33,7 @@ import numpy as np
 
 from virtus.checks import as_member
 from virtus.errors import InputError
-from virtus.safeio import check_keys
+from virtus.io.safeio import check_keys
 
 #: Pattern input levels of an 8-bit projector.
 LEVELS = 255
@@ -269,7 +269,7 @@ PROJECTOR_PRESETS: dict[str, ProjectorModel] = {
 def load_projector(spec: str | Path) -> ProjectorModel:
     """A projector model by preset name (:data:`PROJECTOR_PRESETS`) or from a YAML/JSON file
     of :class:`ProjectorModel` parameters (unknown keys refused)."""
-    from virtus.safeio import read_yaml
+    from virtus.io.safeio import read_yaml
 
     if isinstance(spec, str) and spec in PROJECTOR_PRESETS:
         return PROJECTOR_PRESETS[spec]

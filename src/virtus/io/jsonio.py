@@ -1,13 +1,13 @@
 """JSON files written one way: numpy values and paths serialised, the file replaced atomically.
 
-Reading is the other half and lives in :mod:`virtus.safeio` (:func:`~virtus.safeio.read_json`:
+Reading is the other half and lives in :mod:`virtus.io.safeio` (:func:`~virtus.io.safeio.read_json`:
 size, UTF-8, depth and syntax checked). Non-finite floats are written as the ``NaN`` /
 ``Infinity`` literals Python's ``json`` uses; ``read_json`` refuses them unless called with
 ``allow_nan=True`` (reports may hold NaN statistics; configuration files never do).
 
-Jobs that own an output directory write through :func:`virtus.runs.write_json_atomic`
+Jobs that own an output directory write through :func:`virtus.io.runs.write_json_atomic`
 (staging in the run's ``.virtus-tmp/``); :func:`write_json` is the same guarantee for the
-lower layers, which may not import :mod:`virtus.runs`.
+lower layers, which may not import :mod:`virtus.io.runs`.
 """
 
 from __future__ import annotations

@@ -17,11 +17,11 @@ import numpy as np
 from virtus import paper
 from virtus.checks import positive
 from virtus.errors import InputError
-from virtus.isaac import intrinsics_from_isaac, isaac_params
-from virtus.jsonio import write_json
-from virtus.optics import Intrinsics
-from virtus.safeio import check_keys, closest_key, read_json
-from virtus.transforms import Pose, check_rotation
+from virtus.geometry.isaac import intrinsics_from_isaac, isaac_params
+from virtus.geometry.optics import Intrinsics
+from virtus.geometry.transforms import Pose, check_rotation
+from virtus.io.jsonio import write_json
+from virtus.io.safeio import check_keys, closest_key, read_json
 
 #: Keys the rig schema requires at its top level (DESIGN.md section 3).
 _RIG_KEYS = ("camera", "projector", "proj2cam")
@@ -135,7 +135,7 @@ class Rig:
     def load_json(cls, path: str | Path) -> Rig:
         """Read a rig (or a calibration file using the rig schema) from JSON.
 
-        The file is read through :func:`virtus.safeio.read_json` (size, UTF-8, depth and
+        The file is read through :func:`virtus.io.safeio.read_json` (size, UTF-8, depth and
         syntax checked; NaN refused) and must hold a JSON object; see :meth:`from_dict`.
         """
         return cls.from_dict(read_json(path, "rig", expect=dict))

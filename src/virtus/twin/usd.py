@@ -5,11 +5,11 @@ Needs ``usd-core`` (``pip install 'virtus-fpp[usd]'``); without it every functio
 
 Writing (:func:`export_usd`): a stage with ``metersPerUnit`` stated (1 or 0.01, ...), up
 axis Z and Isaac's world (the camera at the origin looking along +X, +Z up;
-:mod:`virtus.twin`)::
+:mod:`virtus.twin.parameters`)::
 
     /World                       Xform (default prim); virtus:ambient
     /World/Rig/Camera            UsdGeom.Camera: focalLength, apertures and offsets in tenths
-                                 of a scene unit (virtus.isaac), clippingRange;
+                                 of a scene unit (virtus.geometry.isaac), clippingRange;
                                  OmniLensDistortionOpenCvPinholeAPI (omni:lensdistortion:*,
                                  pixels, float); virtus:opencv:K (matrix3d),
                                  virtus:opencv:dist (double[]), virtus:opencv:imageSize
@@ -50,12 +50,12 @@ from typing import Any
 
 import numpy as np
 
-from virtus.devices import Camera, Projector, Rig
 from virtus.errors import InputError, VirtusError
-from virtus.isaac import CV_TO_USD_CAMERA, intrinsics_from_isaac, usd_camera_params
-from virtus.optics import Intrinsics
-from virtus.transforms import Pose
-from virtus.twin import (
+from virtus.geometry.devices import Camera, Projector, Rig
+from virtus.geometry.isaac import CV_TO_USD_CAMERA, intrinsics_from_isaac, usd_camera_params
+from virtus.geometry.optics import Intrinsics
+from virtus.geometry.transforms import Pose
+from virtus.twin.parameters import (
     DEFAULT_PIXEL_SIZE_M,
     DIST_NAMES,
     OPENCV_PINHOLE,
@@ -288,7 +288,13 @@ def _write_object(
     import trimesh
     from pxr import Sdf, UsdGeom
 
-    from virtus.scene import BoxObject, MeshObject, PlaneObject, SphereObject, TexturedPlaneObject
+    from virtus.scene.model import (
+        BoxObject,
+        MeshObject,
+        PlaneObject,
+        SphereObject,
+        TexturedPlaneObject,
+    )
 
     path = f"{OBJECTS}/{name}"
     texture = None
@@ -348,13 +354,13 @@ def export_usd(
     Parameters
     ----------
     path : the stage file (``.usda`` text, ``.usdc``/``.usd`` binary).
-    scene : a :class:`virtus.scene.Scene` (its world frame: the camera frame unless
+    scene : a :class:`virtus.scene.model.Scene` (its world frame: the camera frame unless
         ``cam2world`` says otherwise) or None.
     rig : the rig whose camera and projector are written (None: no devices; the stage's
         world still puts the camera frame at the origin looking along +X).
     cam2world : the camera's pose in the scene's world (default identity).
     meters_per_unit : the stage's ``metersPerUnit``.
-    pixel_size_m : pixel pitch of the USD camera (:mod:`virtus.isaac`), metres.
+    pixel_size_m : pixel pitch of the USD camera (:mod:`virtus.geometry.isaac`), metres.
     pattern : (H_p, W_p) image the projector shows (uint8/uint16 or floats in [0, 1]);
         default: full white. Written beside the stage, mirrored (:data:`RECTLIGHT_MIRROR`).
 
@@ -429,7 +435,7 @@ class UsdContents:
 
     Attributes
     ----------
-    scene : the objects as a :class:`virtus.scene.Scene` in the camera's OpenCV frame (the
+    scene : the objects as a :class:`virtus.scene.model.Scene` in the camera's OpenCV frame (the
         stage's world frame, in metres, if it has no camera); None without objects.
     camera : the camera's intrinsics, or None (no camera, or no image size known).
     cam2stage : the camera's OpenCV frame -> the stage's world, metres (None without one).
@@ -566,7 +572,7 @@ def _read_object(prim: Any, stage2scene: Pose, mpu: float, mesh_dir: Path) -> tu
     import trimesh
     from pxr import Usd, UsdGeom
 
-    from virtus.scene import (
+    from virtus.scene.model import (
         BoxObject,
         Material,
         MeshObject,
@@ -620,7 +626,7 @@ def read_usd(path: str | Path) -> UsdContents:
     require_usd()
     from pxr import Usd, UsdGeom, UsdLux
 
-    from virtus.scene import Scene
+    from virtus.scene.model import Scene
 
     path = Path(path)
     if not path.is_file():
@@ -681,7 +687,7 @@ def read_usd(path: str | Path) -> UsdContents:
 
 
 def load_usd_scene(path: str | Path) -> Any:
-    """The objects of a stage as a :class:`virtus.scene.Scene` in its camera's frame."""
+    """The objects of a stage as a :class:`virtus.scene.model.Scene` in its camera's frame."""
     contents = read_usd(path)
     if contents.scene is None:
         raise InputError(f"stage {path}", "meshes, spheres or cubes", "no geometry")

@@ -30,7 +30,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from virtus.checks import finite, positive, positive_int
-from virtus.optics import Intrinsics
+from virtus.geometry.optics import Intrinsics
 
 #: OpenCV device frame (x right, y down, z forward) -> USD camera/light frame (x right,
 #: y up, looking along -z).
@@ -72,7 +72,7 @@ def isaac_params(intrinsics: Intrinsics, pixel_size: float) -> IsaacCameraParams
 
     ``focal = fx s``, ``A_h = W s``, ``A_v = H s fx / fy`` (non-square pixels), offsets as
     in the module docstring; the result is in the unit of ``pixel_size``. Lens distortion
-    has no USD pinhole equivalent (see :mod:`virtus.usd` for Omniverse's OpenCV lens API).
+    has no USD pinhole equivalent (see :mod:`virtus.twin.usd` for Omniverse's OpenCV lens API).
     """
     s = positive("pixel_size", pixel_size)
     i = intrinsics

@@ -9,8 +9,9 @@ Conventions
 
 The projector is modelled as an inverse camera: the same :class:`Intrinsics` map a point in
 the projector frame to the projector pixel that lights it. Poses live in
-:mod:`virtus.transforms`, devices and rigs in :mod:`virtus.devices`, Isaac Sim parameters in
-:mod:`virtus.isaac`.
+:mod:`virtus.geometry.transforms`, devices and rigs in :mod:`virtus.geometry.devices`, Isaac Sim
+parameters in
+:mod:`virtus.geometry.isaac`.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import numpy as np
 
 from virtus.checks import as_float_array, as_points, finite, positive, positive_int
 from virtus.errors import InputError
-from virtus.safeio import check_keys
+from virtus.io.safeio import check_keys
 
 #: Largest image side accepted, pixels: 4x the widest machine-vision sensors (about 8k px);
 #: a larger side is a mistake, not a device.

@@ -17,7 +17,7 @@ frame ``f`` is a pure function of ``(seed, f, p)``. The pair ``(seed, f)`` is mi
 (Jarzynski & Olano, "Hash Functions for GPU Rendering", JCGT 2020) of ``(p, k0, k1, 0)``
 gives two uniform 24-bit numbers, and Box-Muller turns them into one normal. Integer hashing
 is exact on every backend, so the same formula runs here in numpy and on the device in
-Dr.Jit (``virtus.render.sensor_jit``): a frame's noise never depends on how the work is
+Dr.Jit (``virtus.render.jit.noise``): a frame's noise never depends on how the work is
 split into blocks, threads or kernels, and the same seed gives the same bytes. Between
 backends only the float32 ``log``/``cos`` may differ by an ulp, which moves a digital
 number only when the value sits within that ulp of a rounding edge.
@@ -37,7 +37,7 @@ import numpy as np
 
 from virtus.checks import positive
 from virtus.errors import InputError, VirtusError
-from virtus.safeio import check_keys
+from virtus.io.safeio import check_keys
 
 #: Camera ADC bit depths.
 BIT_DEPTHS = (8, 10, 12, 16)
@@ -479,7 +479,7 @@ SENSOR_PRESETS: dict[str, Sensor] = {
 def load_sensor(spec: str | Path) -> Sensor:
     """A sensor by preset name (:data:`SENSOR_PRESETS`) or from a YAML/JSON file of
     :class:`Sensor` parameters (unknown keys refused)."""
-    from virtus.safeio import read_yaml
+    from virtus.io.safeio import read_yaml
 
     if isinstance(spec, str) and spec in SENSOR_PRESETS:
         return SENSOR_PRESETS[spec]

@@ -1,8 +1,8 @@
 """Built-in scenes by name, for ``virtus scan --scene NAME`` and the demo.
 
-* ``sphere``: the paper's experiment, :func:`virtus.scene.default_scene` (a matte sphere of
+* ``sphere``: the paper's experiment, :func:`virtus.scene.model.default_scene` (a matte sphere of
   radius 100 mm at 1 m, background plane at 1.3 m).
-* ``freeform``: the procedural free-form object (:func:`virtus.objects.freeform_object`,
+* ``freeform``: the procedural free-form object (:func:`virtus.scene.procedural.freeform_object`,
   about 10 cm) centred 1 m in front of the camera, same background. Its mesh is written as
   ``freeform.stl`` (metres) into the given directory, which the scene references.
 """
@@ -15,14 +15,13 @@ from typing import Any
 import numpy as np
 
 from virtus.errors import InputError
-from virtus.transforms import Pose
+from virtus.geometry.transforms import Pose
 
 __all__ = [
     "BUILTIN_SCENES",
     "FREEFORM_CENTRE_M",
     "builtin_scene",
     "freeform_scene",
-    "resolve_scene",
 ]
 
 BUILTIN_SCENES = ("sphere", "freeform")
@@ -48,8 +47,8 @@ def freeform_scene(
         default: a translation to :data:`FREEFORM_CENTRE_M`.
     background : add the background plane at z = 1.3 m.
     """
-    from virtus.objects import write_freeform_object
-    from virtus.scene import MeshObject, PlaneObject, Scene
+    from virtus.scene.model import MeshObject, PlaneObject, Scene
+    from virtus.scene.procedural import write_freeform_object
 
     folder = Path(directory)
     path = folder / "freeform.stl"
@@ -65,24 +64,10 @@ def freeform_scene(
 
 def builtin_scene(name: str, directory: str | Path) -> Any:
     """A built-in scene by name (:data:`BUILTIN_SCENES`); assets go to ``directory``."""
-    from virtus.scene import default_scene
+    from virtus.scene.model import default_scene
 
     if name == "sphere":
         return default_scene()
     if name == "freeform":
         return freeform_scene(directory)
     raise InputError("scene", f"a YAML file or one of {', '.join(BUILTIN_SCENES)}", name)
-
-
-def resolve_scene(spec: str | Path, directory: str | Path) -> Any:
-    """A scene from a YAML path or a built-in name (assets of built-ins go to ``directory``)."""
-    from virtus.scene import load_scene
-
-    text = str(spec)
-    if text in BUILTIN_SCENES and not Path(text).is_file():
-        return builtin_scene(text, directory)
-    if not Path(text).is_file():
-        raise InputError(
-            "scene", f"an existing scene YAML file or one of {', '.join(BUILTIN_SCENES)}", text
-        )
-    return load_scene(text)

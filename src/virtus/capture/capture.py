@@ -28,10 +28,10 @@ Format ``virtus.capture/1`` (virtus 0.1) is read too: it has no ``cam2world`` (i
 no sensor and no seed.
 
 Writing is safe against failures: frames and ground truth are each written through a
-staging folder and renamed into place (:func:`virtus.runs.atomic_write_files`), the
+staging folder and renamed into place (:func:`virtus.io.runs.atomic_write_files`), the
 manifest last; an error (disk full, permission denied) removes what the call wrote and
 names the path. Jobs that write a capture into an output directory own it through
-:func:`virtus.runs.claim_run` (:data:`LAYOUT`, :meth:`Capture.file_names`).
+:func:`virtus.io.runs.claim_run` (:data:`LAYOUT`, :meth:`Capture.file_names`).
 
 Memory: a capture holds every frame at once, and rendering holds the trace's taps; both are
 estimated by :func:`capture_bytes` and refused above :data:`MAX_CAPTURE_BYTES` *before*
@@ -50,16 +50,16 @@ from typing import Any
 import numpy as np
 
 from virtus import __version__
-from virtus.devices import Rig
+from virtus.capture.groundtruth import ARRAY_NAMES, GroundTruth
 from virtus.errors import InputError, VirtusError
-from virtus.groundtruth import ARRAY_NAMES, GroundTruth
-from virtus.images import frame_name, list_images, read_image, read_images, write_frames
-from virtus.jsonio import write_json
+from virtus.geometry.devices import Rig
+from virtus.geometry.transforms import Pose
+from virtus.io.images import frame_name, list_images, read_image, read_images, write_frames
+from virtus.io.jsonio import write_json
+from virtus.io.runs import atomic_write_files
+from virtus.io.safeio import load_npy, read_json
 from virtus.patterns import DecodeResult, PatternSequence
-from virtus.runs import atomic_write_files
-from virtus.safeio import load_npy, read_json
-from virtus.sensor import BIT_DEPTHS, Sensor
-from virtus.transforms import Pose
+from virtus.sensor.camera import BIT_DEPTHS, Sensor
 
 #: Format tag written to ``capture.json``.
 CAPTURE_FORMAT = "virtus.capture/2"
@@ -82,7 +82,7 @@ _KEYS = (
 )  # fmt: skip
 #: Sub-folders a capture owns (removed when it is overwritten).
 _OWNED = ("frames", "gt", "scene_assets")
-#: Glob patterns of every file a capture writes (for :func:`virtus.runs.claim_run`).
+#: Glob patterns of every file a capture writes (for :func:`virtus.io.runs.claim_run`).
 LAYOUT = (MANIFEST, "frames/*.png", "gt/*.npy", "scene_assets/*")
 #: Largest memory (bytes) one capture may need: its frames plus the renderer's taps
 #: (:func:`capture_bytes`). Twice a 960 x 960 capture of the paper at 16 spp with 8
@@ -170,7 +170,7 @@ class Capture:
         ``2**bit_depth - 1``.
     sensor : the camera model that rendered the frames; None for imported captures.
     seed : seed of the sensor's noise streams; None for imported captures.
-    scene : the rendered scene (``virtus.scene.Scene``), if known.
+    scene : the rendered scene (``virtus.scene.model.Scene``), if known.
     render : how the frames were rendered (spp, projector pixel model, exposure, variant);
         empty for imported captures.
     provenance : virtus version, source (``"rendered"`` or ``"imported"``), command line.
@@ -251,7 +251,7 @@ class Capture:
 
     @functools.cached_property
     def ground_truth(self) -> GroundTruth:
-        """Exact per-pixel geometry (:class:`virtus.groundtruth.GroundTruth`), read on first
+        """Exact per-pixel geometry (:class:`virtus.capture.groundtruth.GroundTruth`), read on first
         access; :class:`VirtusError` for a capture without ground truth."""
         if self.gt_data is not None:
             return self.gt_data
@@ -349,7 +349,7 @@ class Capture:
         looks complete), then its frames, ground truth and assets. Frames and ground truth
         are written through staging folders, the manifest last; on any error the files this
         call wrote are removed and the error names the path.
-        ``compression``, ``workers``: PNG settings (:func:`virtus.images.write_frames`).
+        ``compression``, ``workers``: PNG settings (:func:`virtus.io.images.write_frames`).
         """
         directory = Path(directory)
         manifest = directory / MANIFEST
@@ -393,7 +393,7 @@ class Capture:
     @classmethod
     def load(cls, directory: str | Path) -> Capture:
         """Read a capture directory (frames and ground truth are read on first access)."""
-        from virtus.scene import Scene
+        from virtus.scene.model import Scene
 
         directory = Path(directory)
         manifest = directory / MANIFEST

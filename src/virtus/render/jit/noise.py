@@ -1,8 +1,9 @@
 """The sensor's counter-based noise streams on Dr.Jit arrays (the device twin of
-:func:`virtus.sensor.standard_normal`).
+:func:`virtus.sensor.camera.standard_normal`).
 
-Same definition (:data:`virtus.sensor.NOISE_STREAM`): per frame a 64-bit key from
-:func:`virtus.sensor.stream_key`, the pcg4d hash (:func:`virtus.sensor.pcg4d`, which runs
+Same definition (:data:`virtus.sensor.camera.NOISE_STREAM`): per frame a 64-bit key from
+:func:`virtus.sensor.camera.stream_key`, the pcg4d hash (:func:`virtus.sensor.camera.pcg4d`, which
+runs
 unchanged on ``UInt32`` arrays) of ``(pixel, k0, k1, 0)``, Box-Muller. Keys are computed on
 the host (a few Python integers per frame) and gathered per lane, so one kernel draws the
 noise of every frame of a pose.
@@ -15,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from virtus.sensor import UNIFORM_SCALE, Sensor, pcg4d, stream_key
+from virtus.sensor.camera import UNIFORM_SCALE, Sensor, pcg4d, stream_key
 
 
 def frame_keys(mi: Any, seed: int, frames: np.ndarray) -> tuple[Any, Any]:
@@ -47,7 +48,7 @@ def noise_streams(
     mi: Any, dr: Any, variant: str, sensor: Sensor, seed: int, frame: Any, pixel: Any,
     n_pixels: int, frames: np.ndarray,
 ) -> tuple[Any, Any, Any]:  # fmt: skip
-    """``(normal, prnu, dsnu)`` per lane for :meth:`virtus.sensor.Sensor.emva`: lane ``i``
+    """``(normal, prnu, dsnu)`` per lane for :meth:`virtus.sensor.camera.Sensor.emva`: lane ``i``
     is pixel ``pixel[i]`` of the ``frame[i]``-th frame of ``frames`` (sequence indices)."""
     k0, k1 = frame_keys(mi, seed, frames)
     normal = standard_normal_jit(

@@ -52,7 +52,7 @@ from typing import Any
 
 from virtus import __version__
 from virtus.errors import InputError, VirtusError
-from virtus.jsonio import json_default
+from virtus.io.jsonio import json_default
 
 #: The run record in an output directory.
 RUN_FILE = "run.json"
@@ -334,7 +334,7 @@ def _relative(name: str) -> str:
 
 
 def _read_record(path: Path) -> dict[str, Any] | None:
-    from virtus.safeio import read_json
+    from virtus.io.safeio import read_json
 
     file = path / RUN_FILE
     if not file.exists():

@@ -8,24 +8,24 @@ from typing import Any, Literal
 
 import numpy as np
 
-from virtus.devices import Rig
+from virtus.capture.groundtruth import GroundTruth
 from virtus.errors import InputError, VirtusError
-from virtus.groundtruth import GroundTruth
-from virtus.optics import ThinLens
-from virtus.projection import ProjectorModel, as_lookup
+from virtus.geometry.devices import Rig
+from virtus.geometry.optics import ThinLens
+from virtus.geometry.transforms import Pose
 from virtus.render.backend import mitsuba, on_gpu
-from virtus.render.device import (
+from virtus.render.jit.synthesis import synthesize_on_device
+from virtus.render.jit.tracing import (
     DeviceFrames,
     DeviceTrace,
     percentile_of_positive,
     trace_device,
 )
 from virtus.render.synthesis import synthesize
-from virtus.render.synthesis_jit import synthesize_on_device
 from virtus.render.tracing import trace
-from virtus.scene import Scene
-from virtus.sensor import NO_LIGHT, Sensor, as_seed
-from virtus.transforms import Pose
+from virtus.scene.model import Scene
+from virtus.sensor.camera import NO_LIGHT, Sensor, as_seed
+from virtus.sensor.projector import ProjectorModel, as_lookup
 
 #: Where frames are synthesised (see :func:`render`).
 SYNTHESIS = ("auto", "sparse", "jit")
@@ -112,7 +112,7 @@ class DeviceRendering:
 
     Attributes
     ----------
-    frames : the digital frames (:class:`~virtus.render.device.DeviceFrames`).
+    frames : the digital frames (:class:`~virtus.render.jit.tracing.DeviceFrames`).
     trace : the pass's taps (its ground truth is computed on demand).
     exposure, sensor, seed, projector, projector_lens, camera_lens : as :class:`Rendering`.
     """
@@ -206,21 +206,23 @@ def render(
 
     Parameters
     ----------
-    rig : camera, projector and ``proj2cam`` (virtus.devices).
-    scene : the scene (virtus.scene); world frame = camera frame unless ``cam2world``.
+    rig : camera, projector and ``proj2cam`` (virtus.geometry.devices).
+    scene : the scene (virtus.scene.model); world frame = camera frame unless ``cam2world``.
     sequence : pattern sequence (virtus.patterns) with ``frames`` and ``profile(i)``.
     spp : supersamples per pixel, a perfect square (stratified grid centred on the pixel).
     lookup : projector pixel model of an otherwise ideal projector: ``"nearest"`` (DMD pixels,
         the default) or ``"bilinear"``; shorthand for ``projector=ProjectorModel(pixel=...)``.
-    projector : the projector model (:class:`virtus.projection.ProjectorModel`: response,
+    projector : the projector model (:class:`virtus.sensor.projector.ProjectorModel`: response,
         black level, pixel PSF, fall-off); give it or ``lookup``, not both.
     exposure : ``"auto"`` (white frame's 99th percentile at 90 % of full scale) or digital
-        numbers per unit radiance (see :mod:`virtus.sensor`).
+        numbers per unit radiance (see :mod:`virtus.sensor.camera`).
     bit_depth : 8, 10, 12 or 16.
     variant : Mitsuba variant; default ``$VIRTUS_MITSUBA_VARIANT`` or automatic.
-    rng : seed of the sensor's counter-based noise streams (see :func:`virtus.sensor.as_seed`).
+    rng : seed of the sensor's counter-based noise streams (see
+    :func:`virtus.sensor.camera.as_seed`).
     cam2world : camera pose in the scene's world frame (default identity).
-    sensor : a full :class:`~virtus.sensor.Sensor` (overrides ``exposure`` and ``bit_depth``).
+    sensor : a full :class:`~virtus.sensor.camera.Sensor` (overrides ``exposure`` and
+    ``bit_depth``).
     synthesis : where frames are synthesised: ``"sparse"`` (scipy sparse products on the
         host, fastest on CPUs), ``"jit"`` (the device-resident path of :func:`render_device`,
         then one copy to the host; fastest on GPUs), ``"auto"`` (``"jit"`` for CUDA variants,

@@ -19,7 +19,7 @@ it into a Mitsuba scene. Conventions:
 
 Bounds (each refusal is an :class:`~virtus.errors.InputError` naming the key or file):
 every number finite; lengths (radii, sizes, centres, translations, mesh vertices in the
-world) within :data:`MAX_LENGTH_M`; the YAML file read through :mod:`virtus.safeio`
+world) within :data:`MAX_LENGTH_M`; the YAML file read through :mod:`virtus.io.safeio`
 (size, UTF-8, aliases, depth); mesh files at most :data:`MAX_MESH_BYTES`, with finite
 vertices, valid face indices, no degenerate (zero-area) faces; textures at most
 :data:`MAX_TEXTURE_BYTES`.
@@ -68,8 +68,8 @@ from pydantic import (
 )
 
 from virtus.errors import InputError, VirtusError
-from virtus.safeio import check_file, load_npy, read_yaml
-from virtus.transforms import Pose
+from virtus.geometry.transforms import Pose
+from virtus.io.safeio import check_file, load_npy, read_yaml
 
 #: Largest length or coordinate a scene may hold, metres (1 km). Bench FPP scenes span
 #: metres; Mitsuba traces in float32, whose spacing at 1 km is already 0.06 mm, so larger
@@ -783,18 +783,13 @@ def _relative_paths(data: Mapping[str, Any], base: Path) -> dict[str, Any]:
 
 
 def load_scene(path: str | Path) -> Scene:
-    """Read a scene YAML file (see the module docstring) or a USD stage.
+    """Read a scene YAML file (see the module docstring).
 
-    The file is read through :func:`virtus.safeio.read_yaml` (size, UTF-8, aliases, depth,
+    The file is read through :func:`virtus.io.safeio.read_yaml` (size, UTF-8, aliases, depth,
     syntax) and must hold a mapping; unknown keys and values out of bounds raise
-    :class:`InputError`. A ``.usda``/``.usdc``/``.usd`` stage is read by
-    :func:`virtus.usd.load_usd_scene` (needs usd-core): its meshes, transforms, materials
-    and camera pose, the objects expressed in the stage camera's frame.
+    :class:`InputError`. USD stages are read by :func:`virtus.pipeline.inputs.load_scene`,
+    which dispatches on the suffix (this floor never imports USD).
     """
-    if Path(path).suffix.lower() in (".usda", ".usdc", ".usd"):
-        from virtus.usd import load_usd_scene
-
-        return load_usd_scene(path)
     data = read_yaml(path, "scene", expect=dict)
     return Scene.from_dict(data, base_dir=Path(path).parent)
 
