@@ -1,9 +1,29 @@
-"""Exception types.
+"""Exception types: one base, and the kinds a caller would catch.
 
-Every error caused by bad input is an :class:`InputError` (a ``ValueError``) whose message
-names the argument, what was expected and what came. The CLI prints such errors as one line
-and exits non-zero.
+Every error virtus raises on purpose is a :class:`VirtusError`; the CLI prints it as one line
+and exits 2. The kinds also inherit the matching built-in (as zarr's ``errors.py`` does), so
+``except ValueError`` or ``except ImportError`` keeps working:
+
+* :class:`InputError` (``ValueError``) -- bad input: names the argument, what was expected
+  and what came;
+* :class:`RunConflict` -- an output directory or file belongs to another
+  run, another configuration, or is in use: resume, overwrite or choose another place;
+* :class:`DegenerateData` (``ValueError``) -- well-formed data that carries too little
+  information for the computation (coplanar points, parallel board poses, nothing decoded);
+* :class:`MissingDependency` (``ImportError``) -- an optional package is not installed; the
+  message names the extra that installs it;
+* :class:`BackendUnavailable` (``RuntimeError``) -- no working renderer backend (Mitsuba
+  variant) on this machine.
 """
+
+__all__ = [
+    "BackendUnavailable",
+    "DegenerateData",
+    "InputError",
+    "MissingDependency",
+    "RunConflict",
+    "VirtusError",
+]
 
 
 class VirtusError(Exception):
@@ -18,6 +38,22 @@ class InputError(VirtusError, ValueError):
         self.expected = expected
         self.got = got
         super().__init__(f"{name}: expected {expected}, got {_short(got)}")
+
+
+class RunConflict(VirtusError):
+    """An output directory or file is another run's, another configuration's, or in use."""
+
+
+class DegenerateData(VirtusError, ValueError):
+    """Data too degenerate for the computation (the message says what was missing)."""
+
+
+class MissingDependency(VirtusError, ImportError):
+    """An optional dependency is not installed (the message says how to install it)."""
+
+
+class BackendUnavailable(VirtusError, RuntimeError):
+    """No renderer backend works on this machine (the message says what is missing)."""
 
 
 def _short(value: object, limit: int = 80) -> str:

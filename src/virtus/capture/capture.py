@@ -51,7 +51,7 @@ import numpy as np
 
 from virtus import __version__
 from virtus.capture.groundtruth import ARRAY_NAMES, GroundTruth
-from virtus.errors import InputError, VirtusError
+from virtus.errors import InputError, RunConflict, VirtusError
 from virtus.geometry.devices import Rig
 from virtus.geometry.transforms import Pose
 from virtus.io.images import frame_name, list_images, read_image, read_images, write_frames
@@ -355,7 +355,7 @@ class Capture:
         manifest = directory / MANIFEST
         if manifest.exists():
             if not overwrite:
-                raise VirtusError(
+                raise RunConflict(
                     f"{directory} already holds a capture "
                     "(pass overwrite=True, or --overwrite on the command line)"
                 )

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from virtus.data.store import DatasetStore
-from virtus.errors import InputError, VirtusError
+from virtus.errors import InputError, MissingDependency
 
 __all__ = ["FringeDataset", "require_torch"]
 
@@ -34,11 +34,11 @@ _TORCH_MISSING = (
 
 
 def require_torch() -> Any:
-    """The ``torch`` module, or :class:`VirtusError` with the install command."""
+    """The ``torch`` module, or :class:`MissingDependency` with the install command."""
     try:
         import torch
     except ImportError:
-        raise VirtusError(_TORCH_MISSING) from None
+        raise MissingDependency(_TORCH_MISSING) from None
     return torch
 
 

@@ -57,7 +57,7 @@ from virtus import __version__
 from virtus.capture.capture import UNITS as CAPTURE_UNITS
 from virtus.data.labels import ArraySpec, checksum_mismatches, sample_checksum
 from virtus.data.shards import ShardEncoder
-from virtus.errors import InputError, VirtusError
+from virtus.errors import InputError, RunConflict
 from virtus.io.runs import config_digest, first_difference, write_json_atomic
 from virtus.io.safeio import read_json
 
@@ -266,12 +266,12 @@ class DatasetStore:
                 where = first_difference(
                     {"storage": storage, **identity}, {"storage": store.storage, **old}
                 )
-                raise VirtusError(
+                raise RunConflict(
                     f"{path} holds a dataset made with another configuration ({where}); "
                     "choose another --out or remove it"
                 )
         elif path.exists() and any(p.name not in _IGNORED for p in path.iterdir()):
-            raise VirtusError(
+            raise RunConflict(
                 f"{path} exists and is not a virtus dataset (no {DESCRIPTION_FILE}); choose a "
                 "new or empty folder"
             )

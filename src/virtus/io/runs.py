@@ -51,7 +51,7 @@ from pathlib import Path
 from typing import Any
 
 from virtus import __version__
-from virtus.errors import InputError, VirtusError
+from virtus.errors import InputError, RunConflict
 from virtus.io.jsonio import json_default
 
 #: The run record in an output directory.
@@ -246,7 +246,7 @@ def directory_lock(directory: str | os.PathLike[str]) -> Iterator[Path]:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            raise VirtusError(
+            raise RunConflict(
                 f"{directory} is in use by another virtus run (pid {_lock_owner(fd)}); wait "
                 "for it to finish or choose another output directory"
             ) from None
@@ -433,17 +433,17 @@ def claim_run(
             elif resume and difference is None:
                 resumed = True
             elif resume:
-                raise VirtusError(
+                raise RunConflict(
                     f"cannot resume in {path}: it holds {_describe(old)} with other settings "
                     f"({difference}); pass --overwrite to start again"
                 )
             elif difference is None:
-                raise VirtusError(
+                raise RunConflict(
                     f"{path} already holds {_describe(old)} with these settings; pass --resume "
                     "to continue it or --overwrite to start again"
                 )
             else:
-                raise VirtusError(
+                raise RunConflict(
                     f"{path} holds {_describe(old)} with other settings ({difference}); "
                     "pass --overwrite to replace it, or choose another output directory"
                 )
@@ -452,7 +452,7 @@ def claim_run(
             if stale and overwrite:
                 _remove_files(path, stale)
             elif stale:
-                raise VirtusError(
+                raise RunConflict(
                     f"{path} holds files of an earlier run without {RUN_FILE} "
                     f"({', '.join(stale[:3])}{', ...' if len(stale) > 3 else ''}); pass "
                     "--overwrite to replace them, or choose another output directory"

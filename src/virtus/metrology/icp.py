@@ -19,7 +19,7 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from virtus.checks import as_points, as_rng, positive, positive_int
-from virtus.errors import InputError, VirtusError
+from virtus.errors import DegenerateData, InputError
 from virtus.geometry.transforms import Pose
 from virtus.metrology.proximity import ClosestPoints, MeshIndex
 
@@ -113,7 +113,7 @@ def icp_to_mesh(
             use = np.abs(near.distances) <= max_distance
         ratio = float(use.mean())
         if use.sum() < 6:
-            raise VirtusError(
+            raise DegenerateData(
                 f"ICP: only {int(use.sum())} points within {max_distance} m of the mesh; "
                 "is the initial pose close enough?"
             )
@@ -137,7 +137,7 @@ def icp_to_mesh(
         try:
             x = np.linalg.solve(A.T @ A, -A.T @ residual)
         except np.linalg.LinAlgError:
-            raise VirtusError(
+            raise DegenerateData(
                 "ICP: the surface does not constrain all 6 degrees of freedom"
             ) from None
         w, v = x[:3], x[3:]

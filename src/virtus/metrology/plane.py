@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from virtus.checks import as_points, as_rng, positive, positive_int
-from virtus.errors import InputError, VirtusError
+from virtus.errors import DegenerateData, InputError
 
 __all__ = ["PlaneFit", "fit_plane"]
 
@@ -122,7 +122,7 @@ def _tls(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     centroid = points.mean(axis=0)
     _, singular, vt = np.linalg.svd(points - centroid, full_matrices=False)
     if singular.size < 2 or singular[1] <= 1e-12 * max(singular[0], 1e-300):
-        raise VirtusError("plane fit: the points are collinear or coincident")
+        raise DegenerateData("plane fit: the points are collinear or coincident")
     return vt[-1], centroid
 
 
@@ -148,9 +148,9 @@ def _msac(pts: np.ndarray, threshold: float, max_iterations: int, gen) -> np.nda
         if cost[k] < best_cost:
             best_cost, best = float(cost[k]), (a[ok][k], normals[k])
     if best is None:
-        raise VirtusError("plane fit: every 3-point sample was degenerate (collinear points?)")
+        raise DegenerateData("plane fit: every 3-point sample was degenerate (collinear points?)")
     origin, normal = best
     inliers = np.abs((pts - origin) @ normal) <= threshold
     if inliers.sum() < 3:
-        raise VirtusError("plane fit: fewer than 3 points within the threshold of any plane")
+        raise DegenerateData("plane fit: fewer than 3 points within the threshold of any plane")
     return inliers

@@ -1,7 +1,7 @@
 """USD stages in and out: rigs (camera, projector) and scenes for NVIDIA Isaac Sim.
 
 Needs ``usd-core`` (``pip install 'virtus-fpp[usd]'``); without it every function raises
-:class:`UsdUnavailable`, one line saying so. Nothing else in virtus imports ``pxr``.
+:class:`MissingDependency`, one line saying so. Nothing else in virtus imports ``pxr``.
 
 Writing (:func:`export_usd`): a stage with ``metersPerUnit`` stated (1 or 0.01, ...), up
 axis Z and Isaac's world (the camera at the origin looking along +X, +Z up;
@@ -50,7 +50,7 @@ from typing import Any
 
 import numpy as np
 
-from virtus.errors import InputError, VirtusError
+from virtus.errors import InputError, MissingDependency, VirtusError
 from virtus.geometry.devices import Camera, Projector, Rig
 from virtus.geometry.isaac import CV_TO_USD_CAMERA, intrinsics_from_isaac, usd_camera_params
 from virtus.geometry.optics import Intrinsics
@@ -83,17 +83,13 @@ OBJECTS, LOOKS = "/World/Objects", "/World/Looks"
 CLIPPING_M = (0.01, 1000.0)
 
 
-class UsdUnavailable(VirtusError):
-    """usd-core is not installed."""
-
-
 def require_usd() -> Any:
-    """The ``pxr`` package, or :class:`UsdUnavailable` with :data:`USD_MISSING`."""
+    """The ``pxr`` package, or :class:`MissingDependency` with :data:`USD_MISSING`."""
     try:
         import pxr
         from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade  # noqa: F401
     except ImportError:
-        raise UsdUnavailable(USD_MISSING) from None
+        raise MissingDependency(USD_MISSING) from None
     return pxr
 
 
@@ -620,7 +616,7 @@ def read_usd(path: str | Path) -> UsdContents:
 
     Raises
     ------
-    UsdUnavailable : usd-core missing.
+    MissingDependency : usd-core missing.
     InputError : not a stage, a sheared or mirrored transform, a camera without size.
     """
     require_usd()
