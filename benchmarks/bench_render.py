@@ -27,11 +27,12 @@ from virtus.capture.groundtruth import ARRAY_NAMES as GT_NAMES
 from virtus.geometry.devices import default_rig
 from virtus.io.images import write_frames
 from virtus.patterns import default_sequence
-from virtus.render import render, synthesize, trace
+from virtus.render import RenderSettings, render, synthesize, trace
 from virtus.render.jit.synthesis import synthesize_digital
 from virtus.render.reference import ReferenceRenderer
 from virtus.scene.model import default_scene
 from virtus.sensor.camera import Sensor
+from virtus.sensor.projector import ProjectorModel
 
 
 def timed(function, repeats: int) -> tuple[list[float], object]:
@@ -62,17 +63,17 @@ def device_section(rig, scene, sequence, args, mitsuba_fps) -> dict:  # noqa: AN
     from virtus.render.jit.tracing import percentile_of_positive, trace_device
     from virtus.render.renderer import render_device
     from virtus.render.tracing import prepare_pass
-    from virtus.sensor.projector import ProjectorModel
 
     n_frames = len(sequence)
     _, dr, _ = mitsuba()
     projector, sensor = ProjectorModel(pixel=args.lookup), Sensor()
     options = {"spp": args.spp}
+    settings = RenderSettings(spp=args.spp)
     repeats = max(args.repeats, 10)
     out: dict[str, object] = {}
 
     def render_to_device():
-        return render_device(rig, scene, sequence, projector=projector, sensor=sensor, **options)
+        return render_device(rig, scene, sequence, settings, projector=projector, sensor=sensor)
 
     warm = synced(dr, render_to_device)()
     times, _ = timed(synced(dr, render_to_device), repeats)
@@ -195,7 +196,8 @@ def main() -> None:
 
     # ---- ours: one pass, all frames, into memory (uint8) ----
     def ours():
-        return render(rig, scene, sequence, spp=args.spp, lookup=args.lookup)
+        settings = RenderSettings(spp=args.spp)
+        return render(rig, scene, sequence, settings, projector=ProjectorModel(pixel=args.lookup))
 
     warm = ours()  # compiles Dr.Jit kernels, caches camera rays
     report["variant"] = warm.variant

@@ -574,6 +574,7 @@ def template(tmp_path_factory) -> Path:
 
     from virtus.geometry.transforms import Pose
     from virtus.pipeline.scan import reconstruct_capture
+    from virtus.render import RenderSettings
     from virtus.scanner import Scanner
     from virtus.scene.model import MeshObject, PlaneObject, Scene
 
@@ -584,7 +585,7 @@ def template(tmp_path_factory) -> Path:
         objects=(MeshObject(path=mesh, pose=Pose(np.eye(3), (0.0, 0.0, 1.0))),),
         background=PlaneObject(size_m=(2.0, 2.0), pose=Pose(np.eye(3), (0.0, 0.0, 1.3))),
     )
-    scanner = Scanner(rig=Rig.from_dict(_rig_dict()), spp=1)
+    scanner = Scanner(rig=Rig.from_dict(_rig_dict()), render=RenderSettings(spp=1))
     directory = root / "cap"
     scanner.capture(scene, rng=0).save(directory)
     reconstruct_capture(directory)

@@ -368,7 +368,7 @@ def test_paper_txt_round_trip_and_units(tmp_path):
 
 
 def test_calibration_json_reads_back_as_a_rig(tmp_path):
-    from virtus.pipeline.calibrate import CalibrationResult
+    from virtus.calib.result import CalibrationResult
 
     board = board_from_spec("4x7")
     poses = paper_poses(RIG, board)[:4]

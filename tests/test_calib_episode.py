@@ -13,10 +13,12 @@ from tests import tolerances as tol
 from virtus.calib.board import board_from_spec
 from virtus.calib.detect import find_grid
 from virtus.calib.poses import BoardPose, paper_poses
+from virtus.calib.scene import BOARD_BLUR_M, board_scene
 from virtus.errors import VirtusError
 from virtus.geometry.devices import Rig, default_rig
 from virtus.geometry.transforms import Pose
-from virtus.pipeline.calibrate import BOARD_BLUR_M, board_scene, calibrate_rig, recalibrate
+from virtus.pipeline.calibrate import calibrate_rig, recalibrate
+from virtus.render import RenderSettings
 from virtus.scanner import Scanner
 
 pytestmark = pytest.mark.slow
@@ -135,7 +137,7 @@ def test_any_sequence_with_both_directions_calibrates(tmp_path):
     sequence = heterodyne_sequence(
         projector.width, projector.height, steps=4, white=False, black=False
     )
-    scanner = Scanner(rig=rig, sequence=sequence, spp=1)
+    scanner = Scanner(rig=rig, sequence=sequence, render=RenderSettings(spp=1))
     result = calibrate_rig(scanner, board="4x7", poses="random:5", rng=3)
     assert not result.dropped_poses
     assert abs(result.truth_error["camera"]["fx_rel_error"]) <= tol.CALIB_JOB_SMALL_FOCAL_REL

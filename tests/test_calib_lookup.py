@@ -7,6 +7,7 @@ import pytest
 import virtus.pipeline.calibrate as job
 from tests.test_calibrate_resume import quarter_rig
 from virtus.cli import main
+from virtus.render import RenderSettings
 from virtus.scanner import Scanner
 from virtus.sensor.projector import Lookup, ProjectorModel
 
@@ -23,7 +24,7 @@ def test_the_scanners_lookup_makes_every_calibration_capture(tmp_path, monkeypat
 
     monkeypatch.setattr(Scanner, "capture", recording)
     projector = ProjectorModel(pixel=Lookup.bilinear)
-    scanner = Scanner(rig=quarter_rig(), projector=projector, spp=1)
+    scanner = Scanner(rig=quarter_rig(), projector=projector, render=RenderSettings(spp=1))
     result = job.calibrate_rig(scanner, board="4x7", poses="random:3", rng=1, out_dir=tmp_path)
     assert seen == ["bilinear"] * 3
     assert result.settings["lookup"] == "bilinear"

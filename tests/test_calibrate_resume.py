@@ -27,6 +27,7 @@ from virtus.errors import InputError, VirtusError
 from virtus.geometry.devices import Camera, Projector, Rig, default_rig
 from virtus.geometry.transforms import Pose
 from virtus.pipeline.calibrate import calibrate_rig, recalibrate
+from virtus.render import RenderSettings
 from virtus.scanner import Scanner
 
 pytestmark = pytest.mark.slow
@@ -276,7 +277,7 @@ def _poses() -> list[BoardPose]:
 
 
 def test_fronto_parallel_poses_are_refused_not_solved(tmp_path):
-    scanner = Scanner(rig=quarter_rig(), spp=1)
+    scanner = Scanner(rig=quarter_rig(), render=RenderSettings(spp=1))
     poses = _poses()
     with pytest.raises(VirtusError, match=r"3 usable board poses are nearly parallel"):
         calibrate_rig(scanner, board="4x7", poses=poses[:3], out_dir=tmp_path / "refused")
@@ -299,7 +300,7 @@ def test_fronto_parallel_poses_are_refused_not_solved(tmp_path):
 
 
 def test_observing_in_worker_processes_gives_the_same_files(tmp_path):
-    scanner = Scanner(rig=quarter_rig(), spp=1)
+    scanner = Scanner(rig=quarter_rig(), render=RenderSettings(spp=1))
     options = {"board": "4x7", "poses": f"random:{N_POSES}", "rng": 5}
     here = calibrate_rig(scanner, out_dir=tmp_path / "here", processes=0, **options)
     workers = calibrate_rig(scanner, out_dir=tmp_path / "workers", processes=2, **options)

@@ -13,7 +13,7 @@ from virtus.geometry.devices import Camera, Projector, Rig, default_rig
 from virtus.geometry.optics import Intrinsics, ThinLens
 from virtus.geometry.transforms import Pose
 from virtus.patterns import default_sequence
-from virtus.render import render
+from virtus.render import RenderSettings, render
 from virtus.render.backend import mitsuba
 from virtus.render.jit.noise import frame_keys, standard_normal_jit
 from virtus.render.jit.tracing import DeviceFrames, percentile_of_positive, trace_device
@@ -24,6 +24,8 @@ from virtus.sensor.camera import SENSOR_PRESETS, Sensor, standard_normal
 from virtus.sensor.projector import PROJECTOR_PRESETS, ProjectorModel
 
 VARIANT = "llvm_ad_rgb"
+#: The default render settings on that variant.
+SETTINGS = RenderSettings(variant=VARIANT)
 #: Frames may differ by 1 DN where a value sits on a rounding edge: float32 sums in another
 #: order (the white frame's 99th percentile, so the exposure, moves by ~1e-8 relative) and
 #: an ulp of log/cos in the noise. Measured: at most 8e-5 of the values.
@@ -51,21 +53,22 @@ def assert_same_rendering(host, device) -> None:
 
 CASES = {
     "ideal nearest": {},
-    "bilinear": {"lookup": "bilinear"},
+    "bilinear": {"projector": ProjectorModel(pixel="bilinear")},
     "noisy sensor, lightcrafter projector (psf, gamma, fall-off)": {
         "sensor": SENSOR_PRESETS["imx174"],
         "projector": PROJECTOR_PRESETS["lightcrafter"],
     },
     "vignetting, 12 bit": {"sensor": Sensor(bit_depth=12, vignetting="cos4")},
-    "interreflections": {"bounces": 2, "spp": 1},
+    "interreflections": {"settings": {"bounces": 2, "spp": 1}},
     "projector defocus": {
-        "projector_lens": ThinLens(aperture_m=0.01, focus_distance_m=0.6),
-        "aperture_samples": 3,
-        "spp": 1,
+        "settings": {
+            "projector_lens": ThinLens(aperture_m=0.01, focus_distance_m=0.6),
+            "aperture_samples": 3,
+            "spp": 1,
+        }
     },
     "camera depth of field": {
-        "camera_lens": ThinLens(aperture_m=0.01, focus_distance_m=0.8),
-        "spp": 4,
+        "settings": {"camera_lens": ThinLens(aperture_m=0.01, focus_distance_m=0.8), "spp": 4}
     },
 }
 
@@ -73,16 +76,18 @@ CASES = {
 @pytest.mark.parametrize("options", CASES.values(), ids=CASES.keys())
 def test_device_path_renders_the_host_frames(options) -> None:
     rig, scene, sequence = small_rig(), default_scene(), default_sequence()
-    host = render(rig, scene, sequence, synthesis="sparse", rng=3, variant=VARIANT, **options)
-    device = render(rig, scene, sequence, synthesis="jit", rng=3, variant=VARIANT, **options)
+    options = dict(options)
+    settings = RenderSettings(variant=VARIANT, **options.pop("settings", {}))
+    host = render(rig, scene, sequence, settings, synthesis="sparse", rng=3, **options)
+    device = render(rig, scene, sequence, settings, synthesis="jit", rng=3, **options)
     assert_same_rendering(host, device)
 
 
 def test_device_path_with_lens_distortion_and_off_centre_principal_points() -> None:
     rig, scene, sequence = distorted_rig(), default_scene(), default_sequence()
-    options = {"rng": 5, "variant": VARIANT, "sensor": SENSOR_PRESETS["webcam"]}
-    host = render(rig, scene, sequence, synthesis="sparse", **options)
-    device = render(rig, scene, sequence, synthesis="jit", **options)
+    options = {"rng": 5, "sensor": SENSOR_PRESETS["webcam"]}
+    host = render(rig, scene, sequence, SETTINGS, synthesis="sparse", **options)
+    device = render(rig, scene, sequence, SETTINGS, synthesis="jit", **options)
     assert_same_rendering(host, device)
 
 
@@ -103,8 +108,8 @@ def test_frames_stay_on_the_device_until_asked() -> None:
     mi, dr, _ = mitsuba(VARIANT)
     sequence = default_sequence()
     result = render_device(
-        small_rig(), default_scene(), sequence, projector=ProjectorModel(), sensor=Sensor(),
-        variant=VARIANT,
+        small_rig(), default_scene(), sequence, SETTINGS, projector=ProjectorModel(),
+        sensor=Sensor(),
     )  # fmt: skip
     assert isinstance(result.frames.data, mi.UInt8)
     assert dr.width(result.frames.data) == len(sequence) * 160 * 160
@@ -162,7 +167,7 @@ def test_16_bit_frames_come_back_whole_and_in_order(shape) -> None:
 def test_a_pose_decoded_on_the_device_is_the_capture_decoded_on_the_host() -> None:
     from virtus.scanner import Scanner
 
-    scanner = Scanner(rig=small_rig(), sensor=SENSOR_PRESETS["imx174"], variant=VARIANT)
+    scanner = Scanner(rig=small_rig(), sensor=SENSOR_PRESETS["imx174"], render=SETTINGS)
     scene = default_scene()
     host = scanner.decoded_view(scene, rng=4, on_device=False)
     device = scanner.decoded_view(scene, rng=4, on_device=True)
@@ -193,10 +198,10 @@ def test_frames_split_over_several_kernels_are_the_same_frames(monkeypatch) -> N
     import virtus.render.jit.synthesis as synthesis_jit
 
     rig, scene, sequence = small_rig(), default_scene(), default_sequence()
-    options = {"rng": 2, "variant": VARIANT, "sensor": SENSOR_PRESETS["imx174"]}
-    whole = render(rig, scene, sequence, synthesis="jit", **options)
+    options = {"rng": 2, "sensor": SENSOR_PRESETS["imx174"]}
+    whole = render(rig, scene, sequence, SETTINGS, synthesis="jit", **options)
     monkeypatch.setattr(synthesis_jit, "_MAX_LANES", 5 * 160 * 160)  # 5 frames per kernel
-    split = render(rig, scene, sequence, synthesis="jit", **options)
+    split = render(rig, scene, sequence, SETTINGS, synthesis="jit", **options)
     np.testing.assert_array_equal(split.frames, whole.frames)
     np.testing.assert_array_equal(split.gt.mask_saturated, whole.gt.mask_saturated)
 
@@ -204,8 +209,8 @@ def test_frames_split_over_several_kernels_are_the_same_frames(monkeypatch) -> N
 def test_frames_are_handed_to_pytorch_without_a_copy() -> None:
     torch = pytest.importorskip("torch")
     result = render_device(
-        small_rig(), default_scene(), default_sequence(), projector=ProjectorModel(),
-        sensor=Sensor(), variant=VARIANT,
+        small_rig(), default_scene(), default_sequence(), SETTINGS, projector=ProjectorModel(),
+        sensor=Sensor(),
     )  # fmt: skip
     tensor = result.frames.torch()
     assert tensor.dtype == torch.uint8 and tuple(tensor.shape) == (52, 160, 160)

@@ -18,7 +18,7 @@ from virtus.errors import InputError
 from virtus.geometry.optics import ThinLens
 from virtus.geometry.transforms import Pose
 from virtus.patterns import default_sequence
-from virtus.render import render, synthesize, trace, tracing
+from virtus.render import RenderSettings, render, synthesize, trace, tracing
 from virtus.render.reference import ReferenceRenderer
 from virtus.render.tracing import sample_offsets
 from virtus.scene.model import (
@@ -30,6 +30,7 @@ from virtus.scene.model import (
     SphereObject,
     TexturedPlaneObject,
 )
+from virtus.sensor.camera import Sensor
 
 #: Bright Lambertian walls: strong interreflections.
 WALL = Material(albedo=0.9, specular=0.0)
@@ -229,10 +230,8 @@ def test_render_passes_the_light_transport_options() -> None:
     rig, scene = small_rig(1 / 12), Scene(corner_walls())
     sequence = default_sequence()
     lens = ThinLens(0.01, 1.0)
-    rendering = render(
-        rig, scene, sequence, spp=4, bounces=2, projector_lens=lens, aperture_samples=2,
-        exposure=100.0,
-    )  # fmt: skip
+    settings = RenderSettings(spp=4, bounces=2, projector_lens=lens, aperture_samples=2)
+    rendering = render(rig, scene, sequence, settings, sensor=Sensor(exposure=100.0))
     traced = trace(rig, scene, spp=4, bounces=2, projector_lens=lens, aperture_samples=2)
     white = sequence.index_of("white")
     expected = np.clip(np.rint(traced.white * np.float32(100.0)), 0, 255)

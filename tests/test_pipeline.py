@@ -14,13 +14,16 @@ from tests.tolerances import (
     TURNTABLE_ICP_SHIFT_M,
     TURNTABLE_REFINE_SHIFT_MM,
 )
+from virtus.calib.io import load_rig_file
 from virtus.cli import main
 from virtus.errors import InputError, VirtusError
 from virtus.geometry.devices import default_rig
+from virtus.geometry.trajectories import turntable_poses
 from virtus.io.ply import read_ply
 from virtus.pipeline.evaluate import evaluate_scan
-from virtus.pipeline.scan import load_rig_file, reconstruct_capture, scan
-from virtus.pipeline.turntable import turntable_poses, turntable_scan
+from virtus.pipeline.scan import reconstruct_capture, scan
+from virtus.pipeline.turntable import turntable_scan
+from virtus.render import RenderSettings
 from virtus.scanner import Scanner
 from virtus.scene.builtin import freeform_scene
 from virtus.scene.model import default_scene
@@ -43,7 +46,7 @@ def freeform_scan(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def sphere_scan(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The sphere scene at 1 spp (cheap: only the files and the geometry matter here)."""
     out = tmp_path_factory.mktemp("sphere")
-    scan(default_scene(), out, scanner=BLURRED.with_(spp=1))
+    scan(default_scene(), out, scanner=BLURRED.with_(render=RenderSettings(spp=1)))
     return out
 
 
@@ -205,7 +208,11 @@ def test_scan_with_a_missing_calibration_fails_before_rendering(tmp_path: Path) 
 def _small_scanner() -> Scanner:
     from tests.test_render_support import small_rig
 
-    return Scanner(rig=small_rig(), spp=1, projector=ProjectorModel(pixel=Lookup.bilinear))
+    return Scanner(
+        rig=small_rig(),
+        projector=ProjectorModel(pixel=Lookup.bilinear),
+        render=RenderSettings(spp=1),
+    )
 
 
 def _record(directory: Path) -> dict:
@@ -224,7 +231,7 @@ def test_scan_owns_its_directory_and_overwrite_drops_the_old_evaluation(tmp_path
     with pytest.raises(VirtusError, match=r"already holds a `virtus scan` run .* --resume"):
         scan("sphere", out, scanner=scanner)
     with pytest.raises(VirtusError, match=r"other settings \(config.scanner.spp: 4 here"):
-        scan("sphere", out, scanner=scanner.with_(spp=4))
+        scan("sphere", out, scanner=scanner.with_(render=scanner.render.with_(spp=4)))
     (out / "evaluation.json").write_text('{"cloud_sha256": "old"}')
     points = (out / "points.ply").read_bytes()
     scan("sphere", out, scanner=scanner, overwrite=True)

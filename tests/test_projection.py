@@ -263,8 +263,9 @@ def test_the_device_synthesis_agrees_with_the_host_one() -> None:
     from virtus.patterns import default_sequence
     from virtus.render import render
     from virtus.scene.model import default_scene
+    from virtus.sensor.camera import Sensor
 
-    kwargs = {"projector": PROJECTOR_PRESETS["lightcrafter"], "bit_depth": 12}
+    kwargs = {"projector": PROJECTOR_PRESETS["lightcrafter"], "sensor": Sensor(bit_depth=12)}
     sparse = render(small_rig(), default_scene(), default_sequence(), synthesis="sparse", **kwargs)
     jit = render(small_rig(), default_scene(), default_sequence(), synthesis="jit", **kwargs)
     difference = np.abs(sparse.frames.astype(np.int32) - jit.frames)

@@ -17,18 +17,17 @@ import pytest
 from tests import tolerances as tol
 from virtus.calib.board import CheckerBoard, CircleBoard, board_from_spec
 from virtus.calib.poses import pose_set
+from virtus.calib.scene import BOARD_BLUR_M, BOARD_TEXEL_M, board_scene
 from virtus.capture.capture import Capture, import_capture
 from virtus.errors import InputError, VirtusError
 from virtus.geometry.devices import Camera, Projector, Rig, default_rig
 from virtus.geometry.transforms import Pose
 from virtus.pipeline.calibrate import (
-    BOARD_BLUR_M,
-    BOARD_TEXEL_M,
-    board_scene,
     calibrate_captures,
     calibrate_rig,
     pose_seed,
 )
+from virtus.render import RenderSettings
 from virtus.scanner import Scanner
 from virtus.scene.model import PlaneObject, Scene
 
@@ -98,7 +97,7 @@ def test_checkerboard_texture_is_the_exact_area_fraction():
 @pytest.mark.slow
 def test_real_path_equals_virtual_path(tmp_path):
     rig = scaled_rig(0.25)
-    scanner = Scanner(rig=rig, spp=1)
+    scanner = Scanner(rig=rig, render=RenderSettings(spp=1))
     board, seed = board_from_spec("4x7"), 5
     virtual = calibrate_rig(
         scanner, board=board, poses="random:4", rng=seed, out_dir=tmp_path / "v"
@@ -148,7 +147,7 @@ def test_real_path_equals_virtual_path(tmp_path):
 
 def test_captures_observed_in_worker_processes_give_the_same_files(tmp_path):
     rig = scaled_rig(0.25)
-    scanner = Scanner(rig=rig, spp=1)
+    scanner = Scanner(rig=rig, render=RenderSettings(spp=1))
     board, seed = board_from_spec("4x7"), 2
     texture = board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=BOARD_BLUR_M)
     poses = pose_set("random:5", rig, board, np.random.default_rng(seed))
@@ -172,7 +171,9 @@ def test_captures_observed_in_worker_processes_give_the_same_files(tmp_path):
 def test_checkerboard_calibration_recovers_the_rig():
     rig = scaled_rig(0.5)
     board = board_from_spec("checker:6x9,square_mm=20")
-    result = calibrate_rig(Scanner(rig=rig, spp=1), board=board, poses="random:10", rng=3)
+    result = calibrate_rig(
+        Scanner(rig=rig, render=RenderSettings(spp=1)), board=board, poses="random:10", rng=3
+    )
     error = result.truth_error
     for device in ("camera", "projector"):
         assert abs(error[device]["fx_rel_error"]) <= tol.CHECKER_FOCAL_REL
@@ -201,7 +202,7 @@ def test_bad_captures_are_one_line_errors(tmp_path, capsys):
 @pytest.mark.slow
 def test_too_few_poses_and_no_board_are_clear_errors(tmp_path, capsys):
     rig = scaled_rig(0.25)
-    scanner = Scanner(rig=rig, spp=1)
+    scanner = Scanner(rig=rig, render=RenderSettings(spp=1))
     blank = Scene(objects=[PlaneObject(size_m=(1.0, 1.0), pose=Pose(np.eye(3), (0, 0, 1.0)))])
     capture = scanner.capture(blank)
     for name in ("a", "b", "c"):

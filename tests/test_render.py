@@ -14,7 +14,7 @@ from virtus.geometry.devices import Camera, Projector, Rig, default_rig
 from virtus.geometry.optics import Intrinsics
 from virtus.geometry.transforms import Pose
 from virtus.patterns import default_sequence
-from virtus.render import render, synthesize, trace
+from virtus.render import RenderSettings, render, synthesize, trace
 from virtus.render.tracing import sample_offsets
 from virtus.scene.model import (
     BoxObject,
@@ -26,6 +26,7 @@ from virtus.scene.model import (
     TexturedPlaneObject,
 )
 from virtus.sensor.camera import Sensor
+from virtus.sensor.projector import ProjectorModel
 
 
 @pytest.fixture(scope="module")
@@ -218,8 +219,9 @@ def test_moving_the_camera_equals_moving_the_scene(sequence) -> None:
         [SphereObject(0.1, tuple(centre), matte)],
         background=PlaneObject((2, 2), cam2world @ plane_pose, matte),
     )
-    a = render(rig, in_camera, sequence, exposure=200.0, lookup="bilinear")
-    b = render(rig, in_world, sequence, exposure=200.0, lookup="bilinear", cam2world=cam2world)
+    inputs = {"projector": ProjectorModel(pixel="bilinear"), "sensor": Sensor(exposure=200.0)}
+    a = render(rig, in_camera, sequence, **inputs)
+    b = render(rig, in_world, sequence, **inputs, cam2world=cam2world)
     np.testing.assert_array_equal(a.gt.mask, b.gt.mask)
     np.testing.assert_allclose(
         b.gt.points[a.gt.mask_hit], a.gt.points[a.gt.mask_hit], atol=tol.SAME_GEOMETRY_M
@@ -264,16 +266,19 @@ def test_frames_follow_the_sensor_model(sequence) -> None:
     np.testing.assert_allclose(radiance[white], traced.white, rtol=tol.SYNTHESIS_WHITE_REL)
     assert np.all(radiance[sequence.index_of("black")] == 0)
 
-    fixed = render(rig, scene, sequence, lookup="bilinear", exposure=300.0, bit_depth=16)
+    bilinear = ProjectorModel(pixel="bilinear")
+    fixed = render(
+        rig, scene, sequence, projector=bilinear, sensor=Sensor(bit_depth=16, exposure=300.0)
+    )
     assert fixed.frames.dtype == np.uint16 and fixed.exposure == 300.0
     expected = np.clip(np.rint(radiance * np.float32(300.0)), 0, 65535)
     assert np.abs(fixed.frames - expected).max() <= tol.FRAME_ROUNDING_DN
 
-    auto = render(rig, scene, sequence, lookup="bilinear")
+    auto = render(rig, scene, sequence, projector=bilinear)
     assert auto.frames.dtype == np.uint8
     level = np.percentile(auto.frames[white][traced.white > 0], 99)
     assert abs(level - 0.9 * 255) <= tol.AUTO_EXPOSURE_LEVEL_DN
-    bright = render(rig, scene, sequence, exposure=5000.0)
+    bright = render(rig, scene, sequence, sensor=Sensor(exposure=5000.0))
     assert bright.frames.max() == 255  # saturation at full scale, not wrap-around
 
 
@@ -285,7 +290,7 @@ def test_jit_synthesis_gives_the_same_frames(sequence, lookup: str, bit_depth: i
         background=PlaneObject((2, 2), Pose(np.eye(3), (0, 0, 1.3)), LAMBERT),
         ambient=0.05,
     )
-    kwargs = {"lookup": lookup, "bit_depth": bit_depth}
+    kwargs = {"projector": ProjectorModel(pixel=lookup), "sensor": Sensor(bit_depth=bit_depth)}
     sparse = render(small_rig(), scene, sequence, synthesis="sparse", **kwargs)
     jit = render(small_rig(), scene, sequence, synthesis="jit", **kwargs)
     assert jit.frames.dtype == sparse.frames.dtype
@@ -319,11 +324,11 @@ def test_object_behind_the_camera_is_an_error(sequence) -> None:
 def test_bad_arguments_are_errors(sequence, monkeypatch) -> None:
     rig, scene = small_rig(), Scene([SphereObject(0.1, (0, 0, 1.0))])
     with pytest.raises(InputError, match="lookup"):
-        render(rig, scene, sequence, lookup="cubic")
+        render(rig, scene, sequence, projector=ProjectorModel(pixel="cubic"))
     with pytest.raises(InputError, match="spp"):
-        render(rig, scene, sequence, spp=3)
+        render(rig, scene, sequence, RenderSettings(spp=3))
     with pytest.raises(InputError, match="variant"):
-        render(rig, scene, sequence, variant="scalar_rgb")
+        render(rig, scene, sequence, RenderSettings(variant="scalar_rgb"))
     monkeypatch.setenv("VIRTUS_MITSUBA_VARIANT", "no_such_variant")
     with pytest.raises(InputError, match="VIRTUS_MITSUBA_VARIANT"):
         trace(rig, scene)

@@ -19,9 +19,10 @@ from tests.test_render_support import (
 from virtus.geometry.devices import default_rig
 from virtus.patterns import default_sequence
 from virtus.reconstruct import points_from_decoded
-from virtus.render import render, synthesize, trace
+from virtus.render import RenderSettings, render, synthesize, trace
 from virtus.render.reference import ReferenceRenderer
 from virtus.scene.model import Scene, default_scene
+from virtus.sensor.projector import ProjectorModel
 
 
 @pytest.fixture(scope="module")
@@ -73,7 +74,10 @@ def tilted_plane_decoded(sequence):
     rig, plane = cropped_rig(320), tilted_plane()
     results = {}
     for lookup in ("nearest", "bilinear"):
-        rendering = render(rig, Scene([plane]), sequence, spp=4, bit_depth=8, lookup=lookup)
+        projector = ProjectorModel(pixel=lookup)
+        rendering = render(
+            rig, Scene([plane]), sequence, RenderSettings(spp=4), projector=projector
+        )
         results[lookup] = (rendering, sequence.decode(rendering.frames, saturation_level=255))
     return rig, plane, results
 
@@ -110,7 +114,7 @@ def test_tilted_plane_depth_is_analytic(tilted_plane_decoded) -> None:
 @pytest.mark.parametrize("lookup", ["nearest", "bilinear"])
 def test_default_sphere_radius_from_decoded_frames(sequence, lookup: str) -> None:
     rig, scene = default_rig(), default_scene()
-    rendering = render(rig, scene, sequence, lookup=lookup)
+    rendering = render(rig, scene, sequence, projector=ProjectorModel(pixel=lookup))
     decoded = sequence.decode(rendering.frames, saturation_level=255)
     gt = rendering.gt
     on_sphere = gt.mask & (np.linalg.norm(gt.points - (0.0, 0.0, 1.0), axis=-1) < 0.1 + 1e-4)

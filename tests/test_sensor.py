@@ -20,6 +20,7 @@ from virtus.sensor.camera import (
     load_sensor,
     standard_normal,
 )
+from virtus.sensor.projector import ProjectorModel
 
 BLOCK = 1 << 14
 
@@ -91,7 +92,7 @@ def test_noise_is_the_same_on_the_jit_path(noisy_trace) -> None:
     # the frames differ only where float32 radiance rounds differently (at most 1 DN, rarely).
     rig, _ = noisy_trace
     sensor = SENSOR_PRESETS["imx174"]
-    kwargs = {"sensor": sensor, "rng": 3, "lookup": "bilinear"}
+    kwargs = {"sensor": sensor, "rng": 3, "projector": ProjectorModel(pixel="bilinear")}
     sparse = render(rig, default_scene(), default_sequence(), synthesis="sparse", **kwargs)
     jit = render(rig, default_scene(), default_sequence(), synthesis="jit", **kwargs)
     difference = np.abs(sparse.frames.astype(np.int32) - jit.frames)

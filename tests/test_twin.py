@@ -12,15 +12,12 @@ from tests import tolerances as tol
 from tests.test_real_calibration import scaled_rig
 from virtus.calib.board import board_from_spec
 from virtus.calib.poses import pose_set
+from virtus.calib.scene import BOARD_BLUR_M, BOARD_TEXEL_M, board_scene
 from virtus.geometry.devices import Camera, Projector, Rig, default_rig
 from virtus.geometry.optics import Intrinsics
-from virtus.pipeline.calibrate import (
-    BOARD_BLUR_M,
-    BOARD_TEXEL_M,
-    board_scene,
-    calibrate_captures,
-)
+from virtus.pipeline.calibrate import calibrate_captures
 from virtus.pipeline.twin import validate_twin, write_twin
+from virtus.render import RenderSettings
 from virtus.scanner import Scanner
 from virtus.twin.parameters import twin_parameters
 
@@ -101,7 +98,7 @@ def test_twin_validation_round_trip(tmp_path, capsys):
     virtual, the validation must find no difference. A twin calibrated from the captures is
     validated too (its numbers are the calibration's errors)."""
     rig, board = _distorted_rig(), board_from_spec("4x7")
-    scanner = Scanner(rig=rig, spp=1)
+    scanner = Scanner(rig=rig, render=RenderSettings(spp=1))
     texture = board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=BOARD_BLUR_M)
     poses = pose_set("random:4", rig, board, np.random.default_rng(2))
     for index, pose in enumerate(poses):

@@ -20,32 +20,55 @@ centred at (u, v) = (0, 0), maps indexed ``[row, col]``; ``rig.proj2cam`` maps p
 points into the camera frame (``X_cam = R @ X_proj + t``), so ``t`` is the projector centre
 in the camera frame. Points that cannot be triangulated (invalid input, parallel rays,
 intersection behind either device) come back as NaN; nothing is clamped.
+
+:func:`reconstruct` triangulates a whole decoded image into a :class:`Reconstruction` and
+drops pixels next to depth discontinuities (mixed pixels at silhouettes:
+:func:`depth_edge_mask`); a rig whose baseline is below :data:`MIN_BASELINE_M` is refused
+(:func:`check_baseline`). :meth:`Reconstruction.save` writes a scan directory's
+reconstruction files (:mod:`virtus.capture.scandir`).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from enum import StrEnum
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from virtus.capture.scandir import save_reconstruction
 from virtus.checks import as_float_array, as_member, as_points
-from virtus.errors import InputError
+from virtus.errors import InputError, VirtusError
 
 if TYPE_CHECKING:
     from virtus.geometry.devices import Rig
     from virtus.geometry.optics import Intrinsics
 
 __all__ = [
+    "DEFAULT_MIN_MODULATION",
+    "EDGE_MAX_STEP",
+    "MIN_BASELINE_M",
+    "Reconstruction",
     "Use",
     "as_use",
+    "check_baseline",
     "depth_edge_mask",
     "depth_map",
     "normals_from_points",
     "points_from_decoded",
+    "reconstruct",
     "triangulate",
     "valid_points",
 ]
+
+#: Default fringe modulation threshold of decoding, a fraction of full scale.
+DEFAULT_MIN_MODULATION = 0.02
+#: Depth-discontinuity filter default, in pixel footprints (see ``depth_edge_mask``).
+EDGE_MAX_STEP = 20.0
+#: Shortest camera-projector baseline (m) triangulation accepts: below 1 um every depth is
+#: undetermined (the rays are parallel); real rigs have 50-300 mm.
+MIN_BASELINE_M = 1e-6
 
 
 class Use(StrEnum):
@@ -250,6 +273,100 @@ def depth_edge_mask(point_map: object, focal_px: float, max_step: float = 20.0) 
             edge[:, :-1] |= jump
             edge[:, 1:] |= jump
     return edge
+
+
+# --- a decoded image, triangulated -----------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class Reconstruction:
+    """A triangulated camera image.
+
+    Attributes
+    ----------
+    points : (H, W, 3) float64, camera frame, metres; NaN where there is no point.
+    edges : (H, W) bool, pixels dropped by the depth-discontinuity filter.
+    rig : the rig the points were triangulated with.
+    """
+
+    points: np.ndarray
+    edges: np.ndarray
+    rig: Rig
+
+    @property
+    def mask(self) -> np.ndarray:
+        """(H, W) bool, pixels with a point."""
+        return np.isfinite(self.points).all(axis=-1)
+
+    @property
+    def depth(self) -> np.ndarray:
+        """(H, W) float64 camera-frame z, metres, NaN where there is no point."""
+        return self.points[..., 2]
+
+    def cloud(self) -> np.ndarray:
+        """(N, 3) float64 valid points in row-major pixel order, camera frame, metres."""
+        return valid_points(self.points)[0]
+
+    def save(
+        self,
+        directory: str | Path,
+        ply_path: str | Path | None = None,
+        source: dict[str, Any] | None = None,
+    ) -> Path:
+        """Write the PLY and, for the directory's own ``points.ply``, ``reconstruction/``;
+        returns the PLY path.
+
+        ``ply_path`` defaults to ``directory/points.ply``, which is written with
+        ``reconstruction/*.npy`` as a pair: ``reconstruction/source.json`` (``source`` plus
+        the rig's and the PLY's SHA-256) is removed first and written last, so a partly
+        replaced pair is stale, and a changed ``points.ply`` removes an ``evaluation.json``
+        of another cloud. Another ``ply_path`` gets only that PLY (the directory's pair is
+        left as it is). Every file is written atomically
+        (:func:`virtus.capture.scandir.save_reconstruction`).
+        """
+        normals = normals_from_points(self.points)
+        return save_reconstruction(directory, self.points, normals, self.rig, ply_path, source)
+
+
+def check_baseline(rig: Rig, what: str = "rig") -> Rig:
+    """``rig``, or :class:`VirtusError` when its baseline is below :data:`MIN_BASELINE_M`
+    (camera and projector at one point: no depth can be triangulated)."""
+    baseline = float(np.linalg.norm(rig.proj2cam.t))
+    if not baseline >= MIN_BASELINE_M:
+        raise VirtusError(
+            f"{what}: the camera-projector baseline is {baseline * 1e6:.3g} um, below "
+            f"{MIN_BASELINE_M * 1e6:g} um: nothing can be triangulated (proj2cam.t is the "
+            "projector's centre in camera coordinates, metres)"
+        )
+    return rig
+
+
+def reconstruct(
+    rig: Rig,
+    proj_uv: object,
+    mask: object | None = None,
+    *,
+    use: Use = "uv",
+    edge_max_step: float | None = EDGE_MAX_STEP,
+) -> Reconstruction:
+    """Triangulate a decoded image and drop depth-discontinuity pixels.
+
+    Parameters
+    ----------
+    rig : rig to triangulate with (true or calibrated); its baseline must be at least
+        :data:`MIN_BASELINE_M` (:func:`check_baseline`).
+    proj_uv : (H, W, 2) float, decoded projector coordinates, NaN where invalid.
+    mask : (H, W) bool, optional decode mask.
+    use : see :func:`triangulate`.
+    edge_max_step : see :func:`depth_edge_mask`; None disables the filter.
+    """
+    check_baseline(rig)
+    points = points_from_decoded(rig, proj_uv, mask, use=use)
+    edges = np.zeros(points.shape[:2], dtype=bool)
+    if edge_max_step is not None:
+        edges = depth_edge_mask(points, rig.camera.intrinsics.fx, edge_max_step)
+        points[edges] = np.nan
+    return Reconstruction(points, edges, rig)
 
 
 # --- internals -----------------------------------------------------------------------------

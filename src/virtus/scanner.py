@@ -1,34 +1,41 @@
 """The virtual scanner: one frozen value that says everything about how captures are made.
 
-A :class:`Scanner` holds the rig, the pattern sequence, the projector pixel model, the
-camera sensor and the render settings. ``scanner.capture(scene, cam2world=..., rng=...)``
-renders one pose into a :class:`virtus.capture.capture.Capture`. Every job (capture, scan,
-calibrate, demo, turntable) takes a scanner; the command line builds it in one place
+A :class:`Scanner` holds the rig, the pattern sequence, the projector model, the camera
+sensor and the render settings (one :class:`virtus.render.settings.RenderSettings`).
+``scanner.capture(scene, cam2world=..., rng=...)`` renders one pose into a
+:class:`virtus.capture.capture.Capture`; ``scanner.check(scene, cam2world)`` refuses, before a
+job starts, what the renderer would refuse only later. Every job (capture, scan, calibrate,
+demo, turntable) takes a scanner; the command line builds it in one place
 (:func:`virtus.cli.options.build_scanner`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from virtus.capture.capture import Capture, rendered_provenance
-from virtus.checks import positive_int
+from virtus.capture.capture import Capture, check_capture_bytes, rendered_provenance
 from virtus.errors import InputError
 from virtus.geometry.devices import Rig, default_rig
-from virtus.geometry.optics import ThinLens
 from virtus.geometry.transforms import Pose
 from virtus.patterns import DecodeResult, PatternSequence, default_sequence
 from virtus.sensor.camera import Sensor, as_seed
 from virtus.sensor.projector import Lookup, ProjectorModel
 
-#: Largest supersample count (a 32 x 32 grid): beyond it a pose needs > 10 GB of samples
-#: at 960 x 960.
-MAX_SPP = 1024
-#: Largest number of camera rays per pose (pixels x spp): ~100 bytes each in the trace.
-MAX_RAYS = 1 << 27
+if TYPE_CHECKING:
+    from virtus.render.settings import RenderSettings
+
+__all__ = ["DecodedView", "Scanner"]
+
+
+def _default_render() -> RenderSettings:
+    # virtus.render is imported where it is used, so that reading captures (virtus.pipeline.scan
+    # imports this module) never loads the renderer.
+    from virtus.render.settings import RenderSettings
+
+    return RenderSettings()
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,28 +64,23 @@ class Scanner:
     projector : the projector model (:class:`virtus.sensor.projector.ProjectorModel`: response,
         black level, pixel model and PSF, fall-off; default: ideal sharp DMD pixels).
     sensor : camera model (:class:`virtus.sensor.camera.Sensor`: bit depth, exposure, EMVA 1288).
-    spp : supersamples per camera pixel, a perfect square.
-    variant : Mitsuba variant (default: ``$VIRTUS_MITSUBA_VARIANT`` or automatic).
-    bounces : path vertices per camera sample that see the projector (1 = direct light;
-        more = interreflections, one tap per bounce).
-    projector_lens, camera_lens : thin lenses (:class:`virtus.geometry.optics.ThinLens`) for
-        projector defocus and camera depth of field; None = pinhole (in focus everywhere).
-    aperture_samples : projector aperture samples per path vertex (default: the renderer's
-        with a projector lens).
+    render : the render settings (:class:`virtus.render.settings.RenderSettings`: spp,
+        Mitsuba variant, bounces, lenses, aperture samples; default ``RenderSettings()``),
+        passed to every render of the scanner. Camera pixels x spp are at most
+        :data:`virtus.render.settings.MAX_RAYS`.
     """
 
     rig: Rig = field(default_factory=default_rig)
-    sequence: PatternSequence | None = None
+    #: Never None once constructed: None gives the paper's default sequence for the rig's
+    #: projector.
+    sequence: PatternSequence = None  # type: ignore[assignment]
     projector: ProjectorModel = field(default_factory=ProjectorModel)
     sensor: Sensor = field(default_factory=Sensor)
-    spp: int = 4
-    variant: str | None = None
-    bounces: int = 1
-    projector_lens: ThinLens | None = None
-    camera_lens: ThinLens | None = None
-    aperture_samples: int | None = None
+    render: RenderSettings = field(default_factory=_default_render)
 
     def __post_init__(self) -> None:
+        from virtus.render.settings import MAX_RAYS, RenderSettings
+
         if not isinstance(self.rig, Rig):
             raise InputError("rig", "a virtus.geometry.devices.Rig", type(self.rig).__name__)
         projector = self.rig.projector.intrinsics
@@ -102,9 +104,11 @@ class Scanner:
             )
         if not isinstance(self.sensor, Sensor):
             raise InputError("sensor", "a virtus.sensor.camera.Sensor", type(self.sensor).__name__)
-        spp = positive_int("spp", self.spp)
-        if spp > MAX_SPP:
-            raise InputError("spp", f"at most {MAX_SPP} supersamples per pixel", spp)
+        if not isinstance(self.render, RenderSettings):
+            raise InputError(
+                "render", "a virtus.render.settings.RenderSettings", type(self.render).__name__
+            )
+        spp = self.render.spp
         camera = self.rig.camera.intrinsics
         if camera.width * camera.height * spp > MAX_RAYS:
             raise InputError(
@@ -112,13 +116,6 @@ class Scanner:
                 f"camera pixels x spp <= {MAX_RAYS} rays per pose",
                 f"{camera.width} x {camera.height} x {spp}",
             )
-        object.__setattr__(self, "spp", spp)
-        for name in ("projector_lens", "camera_lens"):
-            lens = getattr(self, name)
-            if lens is not None and not isinstance(lens, ThinLens):
-                raise InputError(
-                    name, "a virtus.geometry.optics.ThinLens or None", type(lens).__name__
-                )
 
     @property
     def lookup(self) -> Lookup:
@@ -130,33 +127,59 @@ class Scanner:
         return replace(self, **changes)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready description (rig schema, sequence, pixel model, sensor, settings)."""
+        """JSON-ready description (rig schema, sequence, pixel model, sensor, and the render
+        settings' keys at the top level, as :meth:`RenderSettings.to_dict` writes them)."""
         return {
             "rig": self.rig.to_dict(),
-            "sequence": self.sequence.to_dict(),  # type: ignore[union-attr]
+            "sequence": self.sequence.to_dict(),
             "projector": self.projector.to_dict(),
             "sensor": self.sensor.to_dict(),
-            "spp": self.spp,
-            "variant": self.variant,
-            "bounces": self.bounces,
-            "projector_lens": None
-            if self.projector_lens is None
-            else self.projector_lens.to_dict(),
-            "camera_lens": None if self.camera_lens is None else self.camera_lens.to_dict(),
-            "aperture_samples": self.aperture_samples,
+            **self.render.to_dict(),
         }
 
-    def _trace_options(self) -> dict[str, Any]:
-        """The tracing settings every render of this scanner passes on (spp, variant,
-        bounces, lenses, aperture samples)."""
-        return {
-            "spp": self.spp,
-            "variant": self.variant,
-            "bounces": self.bounces,
-            "projector_lens": self.projector_lens,
-            "camera_lens": self.camera_lens,
-            "aperture_samples": self.aperture_samples,
-        }
+    def check(self, scene: Any = None, cam2world: Pose | None = None) -> int:
+        """Everything the renderer would refuse only after a job started, checked before it
+        claims or renders anything; returns the bytes one capture needs.
+
+        The memory (:func:`virtus.capture.capture.capture_bytes`: frames plus the trace's ``spp
+        x bounces x aperture samples`` taps per pixel) against
+        :data:`virtus.capture.capture.MAX_CAPTURE_BYTES`; spp a perfect square; the Mitsuba
+        variant's name; the light-transport counts; and, given a ``scene``, that every object
+        lies in front of the camera placed at ``cam2world``.
+        """
+        from virtus.render.backend import SUPPORTED_VARIANTS
+        from virtus.render.tracing import (
+            DEFAULT_APERTURE_SAMPLES,
+            MAX_APERTURE_SAMPLES,
+            MAX_BOUNCES,
+            sample_offsets,
+        )
+
+        settings = self.render
+        sample_offsets(settings.spp)  # a perfect square
+        if settings.variant is not None and settings.variant not in SUPPORTED_VARIANTS:
+            raise InputError("variant", f"one of {', '.join(SUPPORTED_VARIANTS)}", settings.variant)
+        bounces = _count("bounces", settings.bounces, MAX_BOUNCES)
+        if settings.projector_lens is None:
+            aperture = 1
+        elif settings.aperture_samples is None:
+            aperture = DEFAULT_APERTURE_SAMPLES
+        else:
+            aperture = _count("aperture_samples", settings.aperture_samples, MAX_APERTURE_SAMPLES)
+        if scene is not None and not isinstance(scene, str):
+            from virtus.render.mitsuba_scene import check_in_front
+
+            with np.errstate(all="ignore"):  # a far-off mesh is refused by name, not warned about
+                check_in_front(scene, (cam2world or Pose.identity()).inverse())
+        camera = self.rig.camera.intrinsics
+        return check_capture_bytes(
+            len(self.sequence),
+            camera.width,
+            camera.height,
+            np.dtype(self.sensor.dtype).itemsize,
+            settings.spp * bounces * aperture,
+            what="capture (--spp, --bounces, camera size, sequence length)",
+        )
 
     @property
     def renders_on_gpu(self) -> bool:
@@ -164,7 +187,7 @@ class Scanner:
         frames are best kept on the device (:meth:`render_on_device`)."""
         from virtus.render.backend import on_gpu
 
-        return on_gpu(self.variant)
+        return on_gpu(self.render.variant)
 
     def render_on_device(
         self,
@@ -181,8 +204,8 @@ class Scanner:
         from virtus.render.renderer import render_device
 
         return render_device(
-            self.rig, scene, self.sequence, projector=self.projector, sensor=self.sensor,
-            seed=as_seed(rng), cam2world=cam2world, **self._trace_options(),
+            self.rig, scene, self.sequence, self.render, projector=self.projector,
+            sensor=self.sensor, seed=as_seed(rng), cam2world=cam2world,
         )  # fmt: skip
 
     def decoded_view(
@@ -201,7 +224,7 @@ class Scanner:
         only the decode and the white frame are copied. Otherwise this is exactly
         ``capture(...).decode()``.
         """
-        kinds = [frame.kind for frame in self.sequence.frames]  # type: ignore[union-attr]
+        kinds = [frame.kind for frame in self.sequence.frames]
         white = kinds.index("white") if "white" in kinds else None
         if on_device is None:
             on_device = self.renders_on_gpu
@@ -216,9 +239,9 @@ class Scanner:
             frames.data,
             self.sequence,
             frames.height,
-            frames.width,  # type: ignore[arg-type]
+            frames.width,
             full_scale=self.sensor.full_scale,
-        ).to_host(self.sequence, neighbour_check=None)  # type: ignore[arg-type]
+        ).to_host(self.sequence, neighbour_check=None)
         frame = None if white is None else frames.frame(white)
         return DecodedView(decoded, frame)
 
@@ -255,16 +278,16 @@ class Scanner:
             self.rig,
             scene,
             self.sequence,
+            self.render,
             projector=self.projector,
             rng=seed,
             cam2world=pose,
             sensor=self.sensor,
             threads=threads,
             block_pixels=block_pixels,
-            **self._trace_options(),
         )
         return Capture(
-            sequence=self.sequence,  # type: ignore[arg-type]
+            sequence=self.sequence,
             rig=self.rig,
             frame_data=rendering.frames,
             cam2world=pose,
@@ -276,3 +299,13 @@ class Scanner:
             render=rendering.metadata(),
             provenance=rendered_provenance(command),
         )
+
+
+def _count(name: str, value: object, largest: int) -> int:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int | np.integer)
+        or not (1 <= value <= largest)
+    ):
+        raise InputError(name, f"an integer in 1..{largest}", value)
+    return int(value)

@@ -4,12 +4,18 @@ calibration, comparison with the true rig, calibration files.
 Modules (one concept each):
 
 * :mod:`~virtus.calib.board` -- asymmetric circle boards, the paper's scale equations, texture.
-* :mod:`~virtus.calib.poses` -- the paper's 18 poses, ``random:N``, field-of-view checks.
+* :mod:`~virtus.calib.poses` -- the paper's 18 poses, ``random:N``, field-of-view checks,
+  the pose-spread check of a degenerate set.
+* :mod:`~virtus.calib.scene` -- the board as a scene (textured plane) and its texture settings.
 * :mod:`~virtus.calib.detect` -- grid detection and sub-pixel circle centroids.
 * :mod:`~virtus.calib.projector` -- projector images of the centres (local homographies).
+* :mod:`~virtus.calib.observe` -- pose observation: a pose's capture -> board points and
+  homographies.
 * :mod:`~virtus.calib.solve` -- bias-corrected camera, projector and stereo calibration.
 * :mod:`~virtus.calib.truth` -- calibrated minus true parameters.
-* :mod:`~virtus.calib.io` -- calibration.json, OpenCV YAML, the paper code's text files.
+* :mod:`~virtus.calib.result` -- ``CalibrationResult`` and its files.
+* :mod:`~virtus.calib.io` -- calibration.json, OpenCV YAML, the paper code's text files; the
+  one reader of a rig or calibration file.
 * :mod:`~virtus.calib.synthetic` -- exact renderer-free board images and projector maps.
 
 The job that renders the poses and calibrates (``virtus calibrate``) is
@@ -21,21 +27,52 @@ columns, y along its rows, z into the board; ``board2cam`` maps it into the came
 """
 
 from virtus.calib.board import CircleBoard, board_from_spec
-from virtus.calib.io import load_opencv_yaml, load_paper_txt, save_opencv_yaml, save_paper_txt
-from virtus.calib.poses import BoardPose, paper_poses, pose_set, random_poses
+from virtus.calib.io import (
+    load_calibration,
+    load_opencv_yaml,
+    load_paper_txt,
+    load_rig_file,
+    save_opencv_yaml,
+    save_paper_txt,
+)
+from virtus.calib.observe import check_sequence, observe_arrays, observe_pose
+from virtus.calib.poses import (
+    MIN_POSE_SPREAD_DEG,
+    BoardPose,
+    check_pose_spread,
+    paper_poses,
+    pose_set,
+    pose_spread_deg,
+    random_poses,
+)
+from virtus.calib.result import CalibrationResult
+from virtus.calib.scene import BOARD_BLUR_M, BOARD_TEXEL_M, CHECKER_BLUR_M, board_scene
 from virtus.calib.solve import PoseObservation, calibrate_observations
 from virtus.calib.truth import truth_error
 
 __all__ = [
+    "BOARD_BLUR_M",
+    "BOARD_TEXEL_M",
+    "CHECKER_BLUR_M",
+    "MIN_POSE_SPREAD_DEG",
     "BoardPose",
+    "CalibrationResult",
     "CircleBoard",
     "PoseObservation",
     "board_from_spec",
+    "board_scene",
     "calibrate_observations",
+    "check_pose_spread",
+    "check_sequence",
+    "load_calibration",
     "load_opencv_yaml",
     "load_paper_txt",
+    "load_rig_file",
+    "observe_arrays",
+    "observe_pose",
     "paper_poses",
     "pose_set",
+    "pose_spread_deg",
     "random_poses",
     "save_opencv_yaml",
     "save_paper_txt",

@@ -1,7 +1,9 @@
 """Calibration files: read every calibration virtus accepts, write virtus's own.
 
 :func:`load_calibration` is the one entry point for reading; it returns a :class:`Rig`
-(metres, ``proj2cam``: X_cam = R X_proj + t). Accepted inputs:
+(metres, ``proj2cam``: X_cam = R X_proj + t). :func:`load_rig_file` is the reader for "a rig
+or calibration file" given to a scan, a reconstruction or an import: the same reader, with
+image sizes a file lacks taken from a known rig. Accepted inputs:
 
 * **Rig JSON** (``.json``, DESIGN.md section 3): ``calibration.json`` of ``virtus
   calibrate`` (extra keys ignored), ``virtus rig info --json``, and ``capture.json`` (the rig
@@ -200,6 +202,20 @@ def load_calibration(
     if suffix in _FILESTORAGE_SUFFIXES:
         return _load_filestorage(source, unit, *sizes)
     raise InputError(f"calibration {source}", _ACCEPTED, f"a {suffix or 'suffix-less'} file")
+
+
+def load_rig_file(path: str | Path, like: Rig | None = None, *, units: str | None = None) -> Rig:
+    """Read a rig from any calibration file :func:`load_calibration` reads; image sizes a
+    file lacks (the paper code's text files) are taken from ``like`` (e.g. the capture's
+    rig). ``units``: the length unit of a file that states none."""
+    sizes = {}
+    if like is not None:
+        cam, proj = like.camera.intrinsics, like.projector.intrinsics
+        sizes = {
+            "camera_size": (cam.width, cam.height),
+            "projector_size": (proj.width, proj.height),
+        }
+    return load_calibration(path, units=units, **sizes)
 
 
 def load_opencv_yaml(

@@ -79,9 +79,9 @@ def register(app: typer.Typer) -> None:
         from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
         from virtus.calib.board import board_from_spec
+        from virtus.calib.result import CALIBRATION_FILE
         from virtus.errors import InputError
         from virtus.pipeline.calibrate import (
-            CALIBRATION_FILE,
             calibrate_captures,
             calibrate_rig,
             capture_dirs,

@@ -57,7 +57,7 @@ def register(app: typer.Typer) -> None:
         ground truth. OUT is owned by the run (OUT/run.json): another run's directory is
         refused unless --overwrite."""
         from virtus.pipeline.inputs import load_scene
-        from virtus.pipeline.scan import capture_job, check_renderable
+        from virtus.pipeline.scan import capture_job
         from virtus.scene.model import default_scene
         from virtus.sensor.camera import as_seed
 
@@ -70,7 +70,7 @@ def register(app: typer.Typer) -> None:
             projector_lens=projector_lens, camera_lens=camera_lens,
         )  # fmt: skip
         the_scene = load_scene(scene) if scene is not None else default_scene()
-        check_renderable(scanner, the_scene)
+        scanner.check(the_scene)
         config = {
             "scanner": scanner.to_dict(),
             "scene": str(scene) if scene is not None else "default",

@@ -63,6 +63,7 @@ def register(app: typer.Typer) -> None:
         )
 
         from virtus.pipeline.demo import run_demo
+        from virtus.render.settings import RenderSettings
         from virtus.scanner import Scanner
 
         scanner = build_scanner(
@@ -96,8 +97,8 @@ def register(app: typer.Typer) -> None:
             )
             # With realism on, the same experiment with an ideal sensor and projector is run
             # beside it (OUT/ideal/, its own run) and printed side by side.
-            ideal = Scanner(rig=scanner.rig, sequence=scanner.sequence, spp=scanner.spp,
-                            variant=scanner.variant)  # fmt: skip
+            plain = RenderSettings(spp=scanner.render.spp, variant=scanner.render.variant)
+            ideal = Scanner(rig=scanner.rig, sequence=scanner.sequence, render=plain)
             reference = None
             if scanner != ideal:
                 bar.update(task, description="ideal reference")

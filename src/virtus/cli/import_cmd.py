@@ -56,7 +56,8 @@ def register(app: typer.Typer) -> None:
         from virtus.errors import InputError
         from virtus.io.images import list_images, read_image
         from virtus.patterns import load_sequence_file
-        from virtus.pipeline.scan import capture_job, check_baseline
+        from virtus.pipeline.scan import capture_job
+        from virtus.reconstruct import check_baseline
 
         seq, listed = load_sequence_file(sequence)
         if listed:

@@ -137,8 +137,11 @@ def build_scanner(
     projector_lens: str | None = None,
     camera_lens: str | None = None,
 ) -> Scanner:
-    """The Scanner the command-line options describe (every job builds it here)."""
+    """The Scanner the command-line options describe (every job builds it here), with the
+    one :class:`~virtus.render.settings.RenderSettings` of ``--spp``, ``--variant``,
+    ``--bounces`` and the lenses."""
     from virtus.geometry.devices import Rig, default_rig
+    from virtus.render.settings import RenderSettings
     from virtus.scanner import Scanner
     from virtus.sensor.camera import load_sensor
     from virtus.sensor.projector import load_projector
@@ -151,14 +154,18 @@ def build_scanner(
         the_projector = the_projector.with_(pixel=lookup)
     the_rig = Rig.load_json(rig) if rig is not None else default_rig()
     projector = the_rig.projector.intrinsics
-    return Scanner(
-        rig=the_rig,
-        sequence=load_sequence_option(sequence, projector.width, projector.height),
-        projector=the_projector,
-        sensor=the_sensor,
+    the_sequence = load_sequence_option(sequence, projector.width, projector.height)
+    settings = RenderSettings(
         spp=spp,
         variant=variant,
         bounces=bounces,
         projector_lens=parse_lens(projector_lens, "--projector-lens"),
         camera_lens=parse_lens(camera_lens, "--camera-lens"),
+    )
+    return Scanner(
+        rig=the_rig,
+        sequence=the_sequence,
+        projector=the_projector,
+        sensor=the_sensor,
+        render=settings,
     )

@@ -82,8 +82,9 @@ def register(app: typer.Typer) -> None:
         from rich.console import Console
         from rich.table import Table
 
+        from virtus.calib import load_rig_file
         from virtus.pipeline.inputs import resolve_scene
-        from virtus.pipeline.scan import ScanSettings, load_rig_file
+        from virtus.pipeline.scan import ScanSettings
         from virtus.pipeline.scan import scan as run_scan
         from virtus.pipeline.turntable import check_views
         from virtus.scene.builtin import BUILTIN_SCENES

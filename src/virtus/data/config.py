@@ -363,7 +363,7 @@ class DatasetConfig:
     turntable_views, turntable_tilt_deg : scan mode.
     board : calibration mode board spec (``virtus.calib.board.board_from_spec``).
     ablation_materials, ablation_ambients : ablation cells (names of
-        :mod:`virtus.pipeline.ablation`'s tables).
+        :mod:`virtus.scene.presets`' tables).
     shard_samples : samples per shard (the write unit; each worker owns whole shards).
     codec, level : compression (:data:`CODECS`) and its level.
     label_dtype : ``float32`` or ``float64`` for real-valued labels.
@@ -416,7 +416,7 @@ class DatasetConfig:
             An unknown key (named, with a guess), a value out of its bounds, a missing
             file, an empty mesh folder, or a combination that cannot be generated.
         """
-        from virtus.pipeline.ablation import AMBIENTS, MATERIALS
+        from virtus.scene.presets import AMBIENTS, MATERIALS
         from virtus.sensor.camera import SENSOR_PRESETS
         from virtus.sensor.projector import PROJECTOR_PRESETS
 
@@ -531,12 +531,12 @@ class DatasetConfig:
             ablation_materials=_choices(
                 "ablation.materials",
                 ablation.get("materials", list(MATERIALS)),
-                member(MATERIALS, "virtus.pipeline.ablation.MATERIALS"),
+                member(MATERIALS, "virtus.scene.presets.MATERIALS"),
             ),
             ablation_ambients=_choices(
                 "ablation.ambients",
                 ablation.get("ambients", list(AMBIENTS)),
-                member(AMBIENTS, "virtus.pipeline.ablation.AMBIENTS"),
+                member(AMBIENTS, "virtus.scene.presets.AMBIENTS"),
             ),
             shard_samples=_integer(
                 "storage.shard_samples", storage.get("shard_samples", 8), 1, MAX_SHARD_SAMPLES

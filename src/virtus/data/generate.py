@@ -157,7 +157,7 @@ def sample_meta(spec: SampleSpec, render: dict[str, Any]) -> dict[str, Any]:
         "sequence": scanner.sequence.to_dict(),
         "sensor": scanner.sensor.to_dict(),
         "projector": scanner.projector.to_dict(),
-        "scanner": {"spp": scanner.spp, "bounces": scanner.bounces},
+        "scanner": {"spp": scanner.render.spp, "bounces": scanner.render.bounces},
         "render": render,
         "objects": [o.to_dict() for o in spec.objects],
         "info": spec.info,

@@ -313,6 +313,7 @@ class Randomiser:
 
     def sample(self, index: int) -> SampleSpec:
         """The specification of sample ``index`` (0 <= index < MAX_SAMPLES)."""
+        from virtus.render.settings import RenderSettings
         from virtus.scanner import Scanner
 
         config = self.config
@@ -329,8 +330,7 @@ class Randomiser:
             sequence=sequence,
             projector=self.projectors[projector_index],
             sensor=self.sensors[sensor_index],
-            spp=config.spp,
-            bounces=config.bounces,
+            render=RenderSettings(spp=config.spp, bounces=config.bounces),
         )
         info: dict[str, Any] = {
             "mode": config.mode,
@@ -413,7 +413,7 @@ class Randomiser:
         extra: dict[str, Any] = {}
         placed = []
         if config.mode == "scan":
-            from virtus.pipeline.turntable import turntable_poses
+            from virtus.geometry.trajectories import turntable_poses
 
             view = index % config.turntable_views
             tilt = Pose.from_euler(
@@ -428,7 +428,7 @@ class Randomiser:
             for item, pose in zip(drawn, poses, strict=True):
                 placed.append(self._make(len(placed) + 1, item, pose, rng))
         if config.mode == "ablation":
-            from virtus.pipeline.ablation import AMBIENTS, MATERIALS
+            from virtus.scene.presets import AMBIENTS, MATERIALS
 
             cell = index % self._cells
             material_name = config.ablation_materials[cell // len(config.ablation_ambients)]
@@ -522,7 +522,7 @@ class Randomiser:
     def _board(self, rng: np.random.Generator) -> tuple[list[tuple[ObjectRecord, Any]], dict]:
         """A circle board at a random pose inside both fields (calibration mode)."""
         from virtus.calib.poses import random_poses
-        from virtus.pipeline.calibrate import board_scene
+        from virtus.calib.scene import board_scene
 
         pose = random_poses(self.rig, self.board, 1, rng)[0]
         plane = board_scene(self.board, pose, _board_texture(self.config.board)).objects[0]
@@ -542,7 +542,7 @@ class Randomiser:
 def _board_texture(spec: str) -> np.ndarray:
     """The board's albedo texture (as the calibration job renders it)."""
     from virtus.calib.board import board_from_spec
-    from virtus.pipeline.calibrate import BOARD_BLUR_M, BOARD_TEXEL_M
+    from virtus.calib.scene import BOARD_BLUR_M, BOARD_TEXEL_M
 
     return board_from_spec(spec).texture(pixel_size_m=BOARD_TEXEL_M, blur_m=BOARD_BLUR_M)
 

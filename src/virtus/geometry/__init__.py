@@ -25,6 +25,9 @@ from virtus.geometry.optics import (
     Intrinsics,
     ThinLens,
 )
+from virtus.geometry.trajectories import (
+    turntable_poses,
+)
 from virtus.geometry.transforms import (
     Pose,
     check_rotation,
@@ -44,5 +47,6 @@ __all__ = [
     "isaac_params",
     "projected_size",
     "rig_info",
+    "turntable_poses",
     "usd_camera_params",
 ]

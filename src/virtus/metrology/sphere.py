@@ -14,6 +14,9 @@
    ``|p - c| - r`` of the inliers; inliers are re-selected and the fit repeated until the set
    no longer changes.
 
+:func:`sphere_roi_fit` fits the points of an organised point map near a nominal sphere (an
+operator's crop) and maps the radial errors back to the pixels.
+
 All lengths in metres, points in any Cartesian frame (the centre comes back in the same one).
 """
 
@@ -29,7 +32,7 @@ from virtus.checks import as_points, as_rng, positive, positive_int
 from virtus.errors import InputError, VirtusError
 from virtus.metrology.stats import Histogram, histogram
 
-__all__ = ["SphereFit", "fit_sphere", "sphere_from_4_points"]
+__all__ = ["SphereFit", "fit_sphere", "sphere_from_4_points", "sphere_roi_fit"]
 
 #: Points used to rank hypotheses (a random subset when there are more): ranking needs only
 #: a consistent estimate of each hypothesis' cost, not every point.
@@ -242,6 +245,45 @@ def fit_sphere(
         hist=histogram(inlier_res, bins, (-thr, thr)),
         iterations=done,
     )
+
+
+def sphere_roi_fit(
+    point_map: np.ndarray,
+    centre_m: object,
+    radius_m: float,
+    *,
+    roi_margin: float = 0.1,
+    threshold_m: float = 1e-3,
+    rng: np.random.Generator | int | None = 0,
+) -> tuple[SphereFit, np.ndarray]:
+    """Fit a sphere to the reconstructed points near a nominal sphere.
+
+    Parameters
+    ----------
+    point_map : (H, W, 3) float, reconstructed points (camera frame, metres), NaN where
+        there is none (:attr:`virtus.reconstruct.Reconstruction.points`).
+    centre_m : (3,) nominal centre, camera frame, metres.
+    radius_m : nominal radius, metres.
+    roi_margin : keep points within ``(1 + roi_margin) * radius_m`` of the nominal centre.
+    threshold_m : MSAC inlier threshold, metres.
+    rng : RANSAC sampling.
+
+    Returns
+    -------
+    fit : the sphere fit.
+    error_map : (H, W) float64 signed radial error per pixel (m), NaN outside the ROI.
+    """
+    centre = np.asarray(centre_m, dtype=np.float64)
+    points = np.asarray(point_map, dtype=np.float64)
+    dist = np.linalg.norm(points - centre, axis=-1)
+    with np.errstate(invalid="ignore"):
+        roi = dist <= (1.0 + roi_margin) * radius_m
+    if roi.sum() < 4:
+        raise VirtusError(f"sphere fit: {int(roi.sum())} points near the sphere; is it in view?")
+    fit = fit_sphere(points[roi], threshold_m, rng=rng)
+    error_map = np.full(points.shape[:2], np.nan)
+    error_map[roi] = fit.radial_errors
+    return fit, error_map
 
 
 def _draw_samples(gen: np.random.Generator, n: int, m: int) -> np.ndarray:

@@ -1,34 +1,35 @@
 """Fringe patterns as data, numpy only: coding and decoding of the pattern sets labs use.
 
-* :mod:`~virtus.patterns.sequence` -- ``PatternSequence``: frames, codings, decode plans, files.
+* :mod:`~virtus.patterns.codings` -- phase shifting and Gray/binary codes, and the conventions.
+* :mod:`~virtus.patterns.frames` -- frame kinds, directions and the ``Frame`` record.
+* :mod:`~virtus.patterns.sequence` -- ``PatternSequence``: frames that encode and plan their decode.
+* :mod:`~virtus.patterns.decode` -- decode plans, the decode driver and ``DecodeResult``.
+* :mod:`~virtus.patterns.files` -- the sequence description file (YAML/JSON), read and written.
+* :mod:`~virtus.patterns.catalog` -- built-in sequences: the paper's default, heterodyne.
 * :mod:`~virtus.patterns.phase` -- decoding math: wrapped phase, masks, unwrapping.
 """
 
 from virtus.patterns import phase
-from virtus.patterns.sequence import (
-    CODE_FLAG_RAD,
+from virtus.patterns.catalog import (
     DEFAULT_HETERODYNE_PERIODS,
-    DIRECTIONS,
+    build_sequence,
+    default_sequence,
+    heterodyne_sequence,
+)
+from virtus.patterns.codings import MAX_BITS, BitCode, PhaseCoding, gray_bits_needed
+from virtus.patterns.decode import (
+    CODE_FLAG_RAD,
     FLAG_WARN_FRACTION,
-    KINDS,
-    MAX_BITS,
-    MAX_FRAMES,
     RESIDUAL_FLAG_RAD,
-    BitCode,
     CodePlan,
     DecodePlan,
     DecodeResult,
     DecodeWarning,
-    Frame,
-    PatternSequence,
-    PhaseCoding,
     PhaseSet,
-    build_sequence,
-    default_sequence,
-    gray_bits_needed,
-    heterodyne_sequence,
-    load_sequence_file,
 )
+from virtus.patterns.files import load_sequence_file
+from virtus.patterns.frames import DIRECTIONS, KINDS, MAX_FRAMES, Frame
+from virtus.patterns.sequence import PatternSequence
 
 __all__ = [
     "BitCode",

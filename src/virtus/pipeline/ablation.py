@@ -2,7 +2,7 @@
 
 Like the paper code's ablation mode (materials x ambient light), but measured: every cell
 renders the paper's 100 mm-radius sphere before a wall with one material, one ambient level
-and one realism setting, decodes it, and reports
+(:mod:`virtus.scene.presets`) and one realism setting, decodes it, and reports
 
 * the decoded projector-coordinate error against the exact ground truth (px RMS, and as
   phase of the finest period, rad RMS), over pixels valid in both and away from depth
@@ -44,22 +44,13 @@ import numpy as np
 from virtus.errors import InputError, VirtusError
 from virtus.io.runs import RunDirectory, claim_run, config_digest
 from virtus.io.safeio import read_json
-from virtus.pipeline.demo import sphere_roi_fit
-from virtus.pipeline.scan import EDGE_MAX_STEP, check_renderable, reconstruct
-from virtus.reconstruct import depth_edge_mask
+from virtus.metrology import sphere_roi_fit
+from virtus.reconstruct import EDGE_MAX_STEP, depth_edge_mask, reconstruct
 from virtus.scanner import Scanner
+from virtus.scene.presets import AMBIENTS, MATERIALS, sphere_scene
 from virtus.sensor.camera import SENSOR_PRESETS
 from virtus.sensor.projector import PROJECTOR_PRESETS
 
-#: Sphere materials: (roughness, specular, metal) of :class:`virtus.scene.model.Material`.
-MATERIALS: dict[str, dict[str, Any]] = {
-    "matte": {"roughness": 0.95, "specular": 0.15},
-    "glossy": {"roughness": 0.3, "specular": 0.8},
-    "metal": {"roughness": 0.3, "metal": True},
-    "reflective": {"roughness": 0.05, "metal": True},
-}
-#: Ambient light levels (relative radiance: 1 = a white projector on albedo 1 at 1 m).
-AMBIENTS = {"dark": 0.0, "ambient": 0.3}
 #: Realism settings: each changes the scanner from the ideal one.
 REALISM: dict[str, Callable[[Scanner], Scanner]] = {
     "ideal": lambda s: s,
@@ -68,9 +59,11 @@ REALISM: dict[str, Callable[[Scanner], Scanner]] = {
         projector=PROJECTOR_PRESETS["lightcrafter"].with_(precompensate=False)
     ),
     "projector": lambda s: s.with_(projector=PROJECTOR_PRESETS["lightcrafter"]),
-    "interreflection": lambda s: s.with_(bounces=2),
+    "interreflection": lambda s: s.with_(render=s.render.with_(bounces=2)),
     "all": lambda s: s.with_(
-        sensor=SENSOR_PRESETS["imx174"], projector=PROJECTOR_PRESETS["lightcrafter"], bounces=2
+        sensor=SENSOR_PRESETS["imx174"],
+        projector=PROJECTOR_PRESETS["lightcrafter"],
+        render=s.render.with_(bounces=2),
     ),
 }
 #: Most cells of one run: every combination of the tables.
@@ -115,19 +108,6 @@ def _choose(names: list[str] | None, table: dict[str, Any], what: str) -> list[s
     return list(dict.fromkeys(names))
 
 
-def sphere_scene(material: str, ambient: str) -> Any:
-    """The demo's scene (100 mm sphere at 1 m before a wall) with this sphere material and
-    ambient level."""
-    from virtus.scene.model import Material, Scene, SphereObject, default_scene
-
-    base = default_scene()
-    sphere = next(o for o in base.objects if isinstance(o, SphereObject))
-    dressed = SphereObject(
-        radius_m=sphere.radius_m, center_m=sphere.center_m, material=Material(**MATERIALS[material])
-    )
-    return Scene(objects=(dressed,), background=base.background, ambient=AMBIENTS[ambient])
-
-
 def run_cell(scanner: Scanner, cell: AblationCell, *, seed: int = 0) -> dict[str, Any]:
     """Render, decode and measure one cell (see the module docstring)."""
     from virtus.scene.model import SphereObject
@@ -159,7 +139,7 @@ def run_cell(scanner: Scanner, cell: AblationCell, *, seed: int = 0) -> dict[str
     sphere = next(o for o in scene.objects if isinstance(o, SphereObject))
     try:
         recon = reconstruct(scanner.rig, decoded.proj_uv, decoded.mask)
-        fit, _ = sphere_roi_fit(recon, sphere.center_m, sphere.radius_m, rng=seed)
+        fit, _ = sphere_roi_fit(recon.points, sphere.center_m, sphere.radius_m, rng=seed)
         row.update(
             radius_error_mm=(fit.radius - sphere.radius_m) * 1e3,
             fit_rms_mm=fit.rms * 1e3,
@@ -206,8 +186,9 @@ def run_ablation(
     ----------
     out_dir : directory owned by the run (layout in the module docstring).
     scanner : the ideal scanner the realism settings modify (default: the paper's system).
-    materials, ambients, realism : names to run (default: all of :data:`MATERIALS`,
-        :data:`AMBIENTS`, :data:`REALISM`).
+    materials, ambients, realism : names to run (default: all of
+        :data:`virtus.scene.presets.MATERIALS`, :data:`virtus.scene.presets.AMBIENTS`,
+        :data:`REALISM`).
     seed : seed of the noise streams and the sphere fit.
     progress : called before each cell as ``progress(index, total, cell)``.
     overwrite : remove an earlier run's files first.
@@ -229,7 +210,7 @@ def run_ablation(
     cells = ablation_cells(materials, ambients, realism)
     seed = as_seed(seed)
     for name in dict.fromkeys(c.realism for c in cells):
-        check_renderable(REALISM[name](scanner))
+        REALISM[name](scanner).check()
     config = {
         "scanner": scanner.to_dict(),
         "cells": [[c.material, c.ambient, c.realism] for c in cells],

@@ -3,9 +3,10 @@ or calibrate a real rig from its captures.
 
 :func:`calibrate_rig` is the library function behind ``virtus calibrate``;
 :func:`calibrate_captures` behind ``virtus calibrate --captures``, which runs the same
-detection (:func:`observe_pose`) and solver on captures made anywhere (a real bench through
-:func:`virtus.capture.capture.import_capture`, or rendered), one capture of the whole sequence per
-board pose, and writes the same result files (no truth comparison: the truth is unknown).
+detection (:func:`~virtus.calib.observe.observe_pose`) and solver on captures made anywhere
+(a real bench through :func:`virtus.capture.capture.import_capture`, or rendered), one
+capture of the whole sequence per board pose, and writes the same result files (no truth
+comparison: the truth is unknown).
 
 Rendered calibration:
 
@@ -14,13 +15,14 @@ Rendered calibration:
    (the paper's 18, ``random:N`` or a list) are checked against both fields.
 2. Each pose is captured with the scanner (its rig is the truth; its sequence, projector
    model, sensor and spp are used as they are), with a capture seed derived from the
-   run's seed and the pose's index (:func:`pose_seed`). :func:`observe_pose` detects the
-   circles, refines their centroids on the board under uniform light and fits a local
-   camera->projector homography around each circle from the decoded projector coordinates.
+   run's seed and the pose's index (:func:`pose_seed`).
+   :func:`~virtus.calib.observe.observe_pose` detects the circles, refines their centroids
+   on the board under uniform light and fits a local camera->projector homography around
+   each circle from the decoded projector coordinates.
 3. Camera, projector and their pose are solved (:mod:`virtus.calib.solve`) with OpenCV on
    one thread and compared with the true rig (:mod:`virtus.calib.truth`). A degenerate
-   pose set (boards all nearly parallel: :func:`check_pose_spread`) is refused before any
-   pose is rendered, and again on the poses left usable for the solve.
+   pose set (boards all nearly parallel: :func:`~virtus.calib.poses.check_pose_spread`) is
+   refused before any pose is rendered, and again on the poses left usable for the solve.
 
 Output directory (``out_dir``; owned by the run through :func:`virtus.io.runs.claim_run`)::
 
@@ -63,19 +65,17 @@ import time
 import warnings
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
-from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from virtus import paper
 from virtus.calib.board import Board, CheckerBoard, board_from_dict, board_from_spec
-from virtus.calib.detect import find_grid, refine_points
-from virtus.calib.io import PAPER_TXT_FILES, save_opencv_yaml, save_paper_txt
-from virtus.calib.poses import BoardPose, check_pose, pose_set
-from virtus.calib.projector import local_homographies
+from virtus.calib.observe import check_sequence, observe_arrays, observe_pose
+from virtus.calib.poses import BoardPose, check_pose, check_pose_spread, pose_set
+from virtus.calib.result import RESULT_FILES, CalibrationResult
+from virtus.calib.scene import BOARD_BLUR_M, BOARD_TEXEL_M, CHECKER_BLUR_M, board_scene
 from virtus.calib.solve import MIN_POSES, PoseObservation, calibrate_observations
 from virtus.calib.truth import truth_error
 from virtus.capture.capture import Capture
@@ -83,52 +83,23 @@ from virtus.errors import InputError, VirtusError
 from virtus.geometry.devices import Rig
 from virtus.io.runs import (
     RunDirectory,
-    atomic_write,
-    atomic_write_files,
     claim_run,
     config_digest,
     directory_lock,
-    write_json_atomic,
 )
 from virtus.io.safeio import load_npz, read_json
 from virtus.scanner import Scanner
 from virtus.sensor.camera import MAX_SEED, as_seed
 
-#: The paper's reported numbers (DESIGN.md section 4), for summaries.
-PAPER_RMS_PX = paper.RMS_PX
-#: Gaussian softening (m, board plane) of the printed circles' edges, like slight lens
-#: defocus: with 4 spp the centroid error falls from ~0.005 px to ~0.001 px (measured on
-#: exact synthetic images); a symmetric blur leaves every circle's centroid in place.
-BOARD_BLUR_M = 2e-4
-#: Softening (m) of a checkerboard's square edges: a saddle fit needs the X-junction spread
-#: over a few pixels (measured corner error 0.05 px RMS at 2e-4 m, 0.01 px at 1e-3 m with
-#: 1.75 mm pixels on the board); corners stay at the crossings (point symmetry).
-CHECKER_BLUR_M = 1e-3
-#: Texel size (m) of the board texture: about a quarter of a camera pixel at 0.9 m.
-BOARD_TEXEL_M = 1e-4
 #: Most poses of ``random:N`` (each pose is a full capture: 200 are ~10,000 frames).
 MAX_RANDOM_POSES = 200
-#: Smallest allowed largest angle between the normals of the usable board poses. With every
-#: board (nearly) parallel the focal length is not observable (Zhang's method). Measured on
-#: three 7x13 poses with 0.01 px centroid noise: fx off by 4400 % at 0 deg, 21 % at 0.7 deg,
-#: 3-6 % at 1.4 deg, ~1 % at 2.8 deg, 0.2-0.6 % at 7 deg; the paper's poses span 60 deg.
-MIN_POSE_SPREAD_DEG = 5.0
-
 #: The job's name in ``run.json``.
 COMMAND = "calibrate"
-#: File names in the output directory (layout in the module docstring).
-CALIBRATION_FILE = "calibration.json"
-YAML_FILE = "calibration.yaml"
-PAPER_TXT_DIR = "paper_txt"
+#: File names in the output directory (layout in the module docstring; the result's files,
+#: :data:`~virtus.calib.result.RESULT_FILES`, are :mod:`virtus.calib.result`'s).
 EPISODE_FILE = "episode.json"
 POSE_DIR = "poses"
 TIMING_FILE = "timing.json"
-#: Files the result writes (:meth:`CalibrationResult.save`), relative to the directory.
-RESULT_FILES = (
-    CALIBRATION_FILE,
-    YAML_FILE,
-    *(f"{PAPER_TXT_DIR}/{name}" for name in PAPER_TXT_FILES.values()),
-)
 #: Everything the job may write: an earlier run's files without a ``run.json``.
 LAYOUT = (*RESULT_FILES, EPISODE_FILE, TIMING_FILE, f"{POSE_DIR}/*.npz")
 
@@ -136,137 +107,7 @@ LAYOUT = (*RESULT_FILES, EPISODE_FILE, TIMING_FILE, f"{POSE_DIR}/*.npz")
 Progress = Callable[[int, int, str], None]
 
 
-@dataclass
-class CalibrationResult:
-    """Outcome of :func:`calibrate_rig`.
-
-    Attributes
-    ----------
-    rig : the calibrated rig.
-    rms_px : RMS reprojection error (px): ``camera``, ``projector`` (single-device
-        calibrations, bias-corrected points) and ``stereo`` (joint refinement, both devices).
-    per_pose : per used pose: name, RMS per device, calibrated ``board2cam`` (from the
-        joint refinement, consistent with ``rig``).
-    truth_error : :func:`virtus.calib.truth.truth_error` against the true rig (or None).
-    board : the board.
-    poses : every pose that was captured (including dropped ones).
-    dropped_poses : name -> reason.
-    settings : how the episode ran (poses spec, spp, pixel model, sensor, seed, ...).
-    true_rig : the rig that rendered the images, if known.
-    timing_s : seconds spent by this process (``render_s``, ``observe_s``,
-        ``calibrate_s``); not part of :meth:`to_dict`, which must not depend on the run.
-    """
-
-    rig: Rig
-    rms_px: dict[str, float]
-    per_pose: list[dict[str, Any]]
-    truth_error: dict[str, Any] | None
-    board: Board
-    poses: list[BoardPose]
-    dropped_poses: dict[str, str] = field(default_factory=dict)
-    settings: dict[str, Any] = field(default_factory=dict)
-    true_rig: Rig | None = None
-    timing_s: dict[str, float] = field(default_factory=dict)
-
-    def to_dict(self) -> dict[str, Any]:
-        """The ``calibration.json`` content: rig schema (metres) + calibration fields."""
-        data = self.rig.to_dict()
-        data.update(
-            {
-                "rms_px": self.rms_px,
-                "paper_rms_px": PAPER_RMS_PX,
-                "per_pose": self.per_pose,
-                "dropped_poses": self.dropped_poses,
-                "board": self.board.to_dict(),
-                "poses": [p.to_dict() for p in self.poses],
-                "settings": self.settings,
-            }
-        )
-        if self.truth_error is not None:
-            data["truth_error"] = self.truth_error
-        if self.true_rig is not None:
-            data["true_rig"] = self.true_rig.to_dict()
-        return data
-
-    def save(self, path: str | Path) -> Path:
-        """Write ``calibration.json`` (or the given ``.json`` file) and return its path.
-
-        A directory path gets :data:`RESULT_FILES`: ``calibration.json``, the OpenCV YAML
-        (``calibration.yaml``) and the paper code's text files (``paper_txt/``), each
-        written atomically, ``calibration.json`` last.
-        """
-        path = Path(path)
-        if path.suffix.lower() == ".json":
-            return write_json_atomic(path, self.to_dict())
-        extras = {f"rms_{k}_px": v for k, v in self.rms_px.items()}
-        atomic_write(path / YAML_FILE, lambda tmp: save_opencv_yaml(self.rig, tmp, extras))
-        atomic_write_files(
-            path / PAPER_TXT_DIR,
-            list(PAPER_TXT_FILES.values()),
-            lambda staging: save_paper_txt(self.rig, staging),
-        )
-        return write_json_atomic(path / CALIBRATION_FILE, self.to_dict())
-
-
-# -- one pose -------------------------------------------------------------------------------
-
-
-def board_scene(board: Board, pose: BoardPose, texture: np.ndarray) -> Any:
-    """The scene of one pose: the board as a textured plane (world = camera frame)."""
-    from virtus.scene.model import Scene, TexturedPlaneObject
-
-    plane = TexturedPlaneObject(size_m=board.plane_size_m, texture=texture, pose=pose.board2cam)
-    return Scene(objects=[plane])
-
-
-def check_sequence(sequence: Any) -> None:
-    """Refuse a sequence that cannot calibrate a projector: it needs phase frames in both
-    directions (``u_p`` and ``v_p`` at every circle)."""
-    if tuple(sequence.directions) != ("v", "h"):
-        raise InputError(
-            "sequence",
-            "phase frames in both directions (v and h) to calibrate the projector",
-            f"directions {list(sequence.directions)}",
-        )
-
-
-def observe_pose(capture: Capture, board: Board, name: str) -> PoseObservation:
-    """Detect the board and fit the projector homographies from one pose's capture.
-
-    Parameters
-    ----------
-    capture : the pose's capture; its sequence must have phase frames in both directions
-        (any coding: Gray, heterodyne, ...; white and black frames optional).
-    board : the board.
-    name : the pose's name.
-
-    Notes
-    -----
-    The circles are found in the white frame if the sequence has one, else in the phase
-    background ``A`` (the board under uniform light: the fringes average out), and their
-    centroids are refined on ``A``, where each frame's rounding is averaged out (on the
-    paper's sequence this cuts the centroid error from 0.0033 to 0.0014 px against the
-    white frame). Projector coordinates come from :meth:`Capture.decode`.
-    """
-    check_sequence(capture.sequence)
-    kinds = [frame.kind for frame in capture.sequence.frames]
-    white = capture.frames[kinds.index("white")] if "white" in kinds else None
-    decoded = capture.decode()
-    return observe_arrays(decoded.proj_uv, decoded.background, white, board, name)
-
-
-def observe_arrays(
-    proj_uv: np.ndarray, background: np.ndarray, white: np.ndarray | None, board: Board, name: str
-) -> PoseObservation:
-    """:func:`observe_pose` from what it reads of a pose: the decoded projector coordinates
-    (H, W, 2) px, the phase background (H, W) and the white frame (H, W), or None to detect
-    on the background."""
-    centres = find_grid(background if white is None else white, board)
-    if centres is None:
-        return PoseObservation(name, None, None)
-    centroids = refine_points(background, board, centres)
-    return PoseObservation(name, centroids, local_homographies(proj_uv, board, centres))
-
+# -- observing poses ------------------------------------------------------------------------
 
 #: Most processes observing poses while the renderer makes the next ones.
 MAX_OBSERVE_PROCESSES = 8
@@ -297,7 +138,8 @@ def _observer_count(processes: int | None) -> int:
 
 
 def _observe_timed(*arguments: Any) -> tuple[PoseObservation, float]:
-    """:func:`observe_arrays` and the seconds it took (in a worker process or here)."""
+    """:func:`~virtus.calib.observe.observe_arrays` and the seconds it took (in a worker
+    process or here)."""
     start = time.perf_counter()
     return observe_arrays(*arguments), time.perf_counter() - start
 
@@ -418,7 +260,7 @@ def _episode(
         "poses": poses if isinstance(poses, str) else "custom",
         "n_poses": len(pose_list),
         "frames_per_pose": len(scanner.sequence),  # type: ignore[arg-type]
-        "spp": scanner.spp,
+        "spp": scanner.render.spp,
         "lookup": scanner.projector.pixel.value,
         "projector": scanner.projector.to_dict(),
         "sensor": scanner.sensor.to_dict(),
@@ -449,36 +291,6 @@ def _opencv_single_thread() -> Iterator[None]:
         yield
     finally:
         cv2.setNumThreads(previous)
-
-
-def pose_spread_deg(poses: list[BoardPose]) -> float:
-    """Largest angle (deg) between the normals (board z axes) of a set of board poses."""
-    normals = np.array([pose.board2cam.R[:, 2] for pose in poses])
-    cosines = np.clip(normals @ normals.T, -1.0, 1.0)
-    return float(np.degrees(np.arccos(cosines.min())))
-
-
-def check_pose_spread(poses: list[BoardPose]) -> None:
-    """Refuse a degenerate pose set: every board (nearly) parallel to the others.
-
-    The check uses the poses the boards were rendered in (the job knows them exactly). The
-    solved poses cannot serve: with parallel boards the solve runs off to a wrong focal
-    length whose board poses may tilt by anything (measured 0.06-130 deg), and OpenCV's
-    standard deviation of fx stays tiny there (measured 1e-12-1e-4 relative).
-
-    Raises
-    ------
-    VirtusError : the largest angle between the boards' normals is below
-        :data:`MIN_POSE_SPREAD_DEG` (see there why).
-    """
-    spread = pose_spread_deg(poses)
-    if spread < MIN_POSE_SPREAD_DEG:
-        raise VirtusError(
-            f"calibration: the {len(poses)} usable board poses are nearly parallel "
-            f"(largest angle between their normals {spread:.2f} deg < "
-            f"{MIN_POSE_SPREAD_DEG:g} deg), so the focal lengths cannot be determined; "
-            "add poses tilted by 10-30 deg"
-        )
 
 
 def _solve(
@@ -556,14 +368,15 @@ def calibrate_rig(
 
     Returns
     -------
-    :class:`CalibrationResult`.
+    :class:`~virtus.calib.result.CalibrationResult`.
 
     Raises
     ------
     InputError : bad arguments (checked before anything is rendered or written).
     VirtusError : a pose outside the fields, fewer than 3 usable poses, a degenerate pose
-        set (:func:`check_pose_spread`, before anything is rendered and again on the usable
-        poses), or ``out_dir`` in use by another run or holding another run's files.
+        set (:func:`~virtus.calib.poses.check_pose_spread`, before anything is rendered and
+        again on the usable poses), or ``out_dir`` in use by another run or holding another
+        run's files.
     """
     if not isinstance(scanner, Scanner):
         raise InputError("scanner", "a virtus.scanner.Scanner", type(scanner).__name__)
@@ -678,7 +491,8 @@ def recalibrate(out_dir: str | Path, *, fix_intrinsics: bool | None = None) -> C
 
     Uses ``out_dir/episode.json`` and every finished ``out_dir/poses/<name>.npz`` (poses
     whose file is missing, e.g. after an interrupted run, are left out with a warning), and
-    rewrites the result files (:data:`RESULT_FILES`) while holding the directory's lock.
+    rewrites the result files (:data:`~virtus.calib.result.RESULT_FILES`) while holding the
+    directory's lock.
 
     Parameters
     ----------
@@ -789,7 +603,8 @@ def calibrate_captures(
 ) -> CalibrationResult:
     """Calibrate a rig from captures of a board, one capture of the whole sequence per pose.
 
-    The detection and solve are those of :func:`calibrate_rig` (:func:`observe_pose`,
+    The detection and solve are those of :func:`calibrate_rig`
+    (:func:`~virtus.calib.observe.observe_pose`,
     :func:`virtus.calib.solve.calibrate_observations`), so captures of rendered poses give
     exactly the calibration the rendered job gives. Poses whose board is not found (or not
     fully decoded) are dropped with a warning naming them.
@@ -814,8 +629,8 @@ def calibrate_captures(
 
     Returns
     -------
-    :class:`CalibrationResult` with ``truth_error`` None and ``poses`` the solved board
-    poses (``board2cam``, metres) of the poses used.
+    :class:`~virtus.calib.result.CalibrationResult` with ``truth_error`` None and ``poses``
+    the solved board poses (``board2cam``, metres) of the poses used.
 
     Raises
     ------
@@ -884,7 +699,8 @@ def _record_observed(run: RunDirectory | None, name: str, obs: PoseObservation) 
 
 
 def _observe_capture_timed(capture: Capture, board: Board, name: str) -> tuple[Any, float]:
-    """:func:`observe_pose` (frames read and decoded too) and the seconds it took."""
+    """:func:`~virtus.calib.observe.observe_pose` (frames read and decoded too) and the
+    seconds it took."""
     start = time.perf_counter()
     return observe_pose(capture, board, name), time.perf_counter() - start
 

@@ -8,8 +8,9 @@
    of ``virtus capture``, plus ``decoded/``);
 3. reconstruction with the *calibrated* parameters -> ``DIR/scan/points.ply`` (metres,
    camera frame);
-4. robust sphere fit on the points of the sphere's region of interest -> radius, error,
-   inlier ratio, fit RMS; the same fit with the true rig is reported for reference;
+4. robust sphere fit on the points of the sphere's region of interest
+   (:func:`virtus.metrology.sphere.sphere_roi_fit`) -> radius, error, inlier ratio, fit RMS;
+   the same fit with the true rig is reported for reference;
 5. ``DIR/metrics.json`` (metrics, the config used, provenance) next to the paper's numbers.
 
 ``DIR`` is owned by the run (:func:`virtus.io.runs.claim_run`, command ``demo``): another
@@ -29,21 +30,14 @@ from typing import Any
 import numpy as np
 
 from virtus import paper
-from virtus.errors import VirtusError
+from virtus.capture.scandir import SCAN_LAYOUT
 from virtus.io.runs import RunDirectory, claim_run
-from virtus.metrology import SphereFit, fit_sphere
-from virtus.pipeline.scan import (
-    SCAN_LAYOUT,
-    Reconstruction,
-    ScanSettings,
-    check_baseline,
-    check_renderable,
-    reconstruct,
-    scan_into,
-)
+from virtus.metrology import SphereFit, sphere_roi_fit
+from virtus.pipeline.scan import ScanSettings, scan_into
+from virtus.reconstruct import check_baseline, reconstruct
 from virtus.scanner import Scanner
 
-__all__ = ["PAPER", "DemoConfig", "DemoResult", "run_demo", "sphere_roi_fit"]
+__all__ = ["PAPER", "DemoConfig", "DemoResult", "run_demo"]
 
 #: The paper's reported numbers.
 PAPER = paper.DEMO
@@ -100,44 +94,6 @@ class DemoResult:
     calibration: Any
 
 
-def sphere_roi_fit(
-    recon: Reconstruction,
-    centre_m: object,
-    radius_m: float,
-    *,
-    roi_margin: float = 0.1,
-    threshold_m: float = 1e-3,
-    rng: np.random.Generator | int | None = 0,
-) -> tuple[SphereFit, np.ndarray]:
-    """Fit a sphere to the reconstructed points near a nominal sphere.
-
-    Parameters
-    ----------
-    recon : the reconstruction (camera frame, metres).
-    centre_m : (3,) nominal centre, camera frame, metres.
-    radius_m : nominal radius, metres.
-    roi_margin : keep points within ``(1 + roi_margin) * radius_m`` of the nominal centre.
-    threshold_m : MSAC inlier threshold, metres.
-    rng : RANSAC sampling.
-
-    Returns
-    -------
-    fit : the sphere fit.
-    error_map : (H, W) float64 signed radial error per pixel (m), NaN outside the ROI.
-    """
-    centre = np.asarray(centre_m, dtype=np.float64)
-    points = recon.points
-    dist = np.linalg.norm(points - centre, axis=-1)
-    with np.errstate(invalid="ignore"):
-        roi = dist <= (1.0 + roi_margin) * radius_m
-    if roi.sum() < 4:
-        raise VirtusError(f"sphere fit: {int(roi.sum())} points near the sphere; is it in view?")
-    fit = fit_sphere(points[roi], threshold_m, rng=rng)
-    error_map = np.full(points.shape[:2], np.nan)
-    error_map[roi] = fit.radial_errors
-    return fit, error_map
-
-
 def run_demo(
     out_dir: str | Path = "virtus-demo",
     config: DemoConfig | None = None,
@@ -171,7 +127,7 @@ def run_demo(
     scanner = scanner or Scanner()
     check_pose_spec(config.poses)
     check_baseline(scanner.rig)
-    check_renderable(scanner)
+    scanner.check()
     run_config = {"config": config.to_dict(), "scanner": scanner.to_dict()}
     with claim_run(
         out_dir, COMMAND, run_config, layout=LAYOUT, overwrite=overwrite, resume=resume
@@ -216,7 +172,7 @@ def _run(run: RunDirectory, config: DemoConfig, scanner: Scanner, progress: Any)
     say("sphere fit")
     start = time.perf_counter()
     fit, error_map = sphere_roi_fit(
-        scanned.reconstruction,
+        scanned.reconstruction.points,
         sphere.center_m,
         sphere.radius_m,
         roi_margin=config.roi_margin,
@@ -237,7 +193,7 @@ def _run(run: RunDirectory, config: DemoConfig, scanner: Scanner, progress: Any)
         edge_max_step=config.scan.edge_max_step,
     )
     true_fit, _ = sphere_roi_fit(
-        reference,
+        reference.points,
         sphere.center_m,
         sphere.radius_m,
         roi_margin=config.roi_margin,

@@ -18,13 +18,13 @@ from typing import Any
 import numpy as np
 
 from virtus.capture import scandir as layout
+from virtus.capture.scandir import check_points_current
 from virtus.checks import as_points, positive
 from virtus.errors import VirtusError
 from virtus.geometry.transforms import Pose
 from virtus.io.ply import read_ply
 from virtus.io.runs import directory_lock, file_digest, write_json_atomic
 from virtus.metrology import C2MResult, cloud_to_mesh
-from virtus.pipeline.scan import check_points_current
 
 __all__ = ["MeshEvaluation", "evaluate_points", "evaluate_scan", "scene_meshes"]
 
@@ -124,7 +124,7 @@ def evaluate_scan(
     scan_dir : directory from ``virtus scan`` (capture + ``points.ply``).
     ply_path : the cloud to evaluate (default ``scan_dir/points.ply``, which must be the
         latest reconstruction of the frames the directory holds:
-        :func:`virtus.pipeline.scan.check_points_current`); metres, camera frame.
+        :func:`virtus.capture.scandir.check_points_current`); metres, camera frame.
     register : ICP before measuring.
     save : write ``scan_dir/evaluation.json`` (with the cloud's SHA-256, ``cloud_sha256``,
         which ties it to the cloud it measured), holding the directory's lock.

@@ -6,6 +6,8 @@ by ``theta_k = 2 pi k / N``:
 
     object2cam_k = Pose(R_y(theta_k) @ R_0, c)       (c: the object's centre, camera frame)
 
+(:func:`virtus.geometry.trajectories.turntable_poses`).
+
 Each view is scanned like :func:`virtus.pipeline.scan.scan` (capture, decode, triangulate),
 its points are mapped back into the object frame by the known turntable pose
 (``X_obj = object2cam_k^-1 X_cam``), optionally refined by ICP against the mesh, and all views
@@ -42,21 +44,16 @@ import numpy as np
 from virtus.checks import positive, positive_int
 from virtus.errors import InputError, VirtusError
 from virtus.geometry.devices import Rig
+from virtus.geometry.trajectories import turntable_poses
 from virtus.geometry.transforms import Pose
 from virtus.io.ply import write_ply
 from virtus.io.runs import RunDirectory, claim_run, config_digest
 from virtus.io.safeio import load_npz
 from virtus.metrology import C2MResult, MeshIndex, cloud_to_mesh, icp_to_mesh
-from virtus.pipeline.scan import (
-    ScanSettings,
-    calibration_rig,
-    check_renderable,
-    scan_into,
-)
+from virtus.pipeline.scan import ScanSettings, calibration_rig, scan_into
 from virtus.scanner import Scanner
-from virtus.scene.builtin import FREEFORM_CENTRE_M
 
-__all__ = ["TurntableResult", "turntable_poses", "turntable_scan"]
+__all__ = ["TurntableResult", "turntable_scan"]
 
 #: Points farther than this (m) from the object's bounding box (in the object frame) are not
 #: the object (background, table) and are not merged.
@@ -71,28 +68,6 @@ COMMAND = "turntable"
 VIEW_FILE = "view.npz"
 #: Files of the job (an earlier run's when found without a ``run.json``).
 LAYOUT = ("turntable.json", "merged.ply", "view_*/" + VIEW_FILE, "view_*/capture.json")
-
-
-def turntable_poses(n_views: int, start: Pose | None = None) -> list[Pose]:
-    """``object2cam`` of each view: turns of ``2 pi k / n_views`` about the vertical axis.
-
-    Parameters
-    ----------
-    n_views : number of views (>= 1).
-    start : object2cam of view 0; the turntable axis (parallel to the camera's y axis)
-        passes through its translation, the object's origin. Default: no rotation, origin at
-        :data:`~virtus.scene.builtin.FREEFORM_CENTRE_M`.
-    """
-    n = positive_int("n_views", n_views)
-    start = start or Pose(np.eye(3), FREEFORM_CENTRE_M)
-    c = start.t
-    r0 = start.R
-    poses = []
-    for k in range(n):
-        theta = 2.0 * np.pi * k / n
-        turn = Pose.from_euler("y", theta, degrees=False).R
-        poses.append(Pose(turn @ r0, c))
-    return poses
 
 
 @dataclass(frozen=True, eq=False)
@@ -165,7 +140,7 @@ def turntable_scan(
     out_dir : directory owned by the run (layout in the module docstring).
     n_views : number of turntable angles, 1..:data:`MAX_VIEWS`.
     scale_to_m : metres per mesh-file unit.
-    start : object2cam of view 0 (see :func:`turntable_poses`).
+    start : object2cam of view 0 (see :func:`virtus.geometry.trajectories.turntable_poses`).
     scanner : the virtual scanner (default: the paper's system).
     calibration : rig or calibration file to triangulate with (default: the scanner's rig).
     settings : scan settings.
@@ -192,12 +167,12 @@ def turntable_scan(
 
         built = freeform_object()
         vertices, faces = np.asarray(built.vertices), np.asarray(built.faces)
-        check_renderable(scanner)
+        scanner.check()
     else:
         with np.errstate(all="ignore"):  # a far-off mesh is refused by name, not warned about
             vertices, faces, _ = MeshObject(path=Path(mesh_path), scale_to_m=scale).load()
         first = MeshObject(path=Path(mesh_path), scale_to_m=scale, pose=poses[0])
-        check_renderable(scanner, Scene(objects=(first,)))
+        scanner.check(Scene(objects=(first,)))
     config = {
         "mesh": "freeform" if mesh_path is None else str(mesh_path),
         "n_views": n_views,

@@ -33,21 +33,16 @@ import numpy as np
 
 from virtus.calib.board import Board, board_from_dict, board_from_spec
 from virtus.calib.io import load_calibration
+from virtus.calib.observe import observe_pose
 from virtus.calib.poses import BoardPose
+from virtus.calib.scene import BOARD_BLUR_M, BOARD_TEXEL_M, CHECKER_BLUR_M, board_scene
 from virtus.capture.capture import Capture
 from virtus.errors import InputError, VirtusError
 from virtus.geometry.devices import Rig
 from virtus.geometry.transforms import Pose
 from virtus.io.jsonio import write_json
 from virtus.io.safeio import read_json
-from virtus.pipeline.calibrate import (
-    BOARD_BLUR_M,
-    BOARD_TEXEL_M,
-    CHECKER_BLUR_M,
-    board_scene,
-    capture_dirs,
-    observe_pose,
-)
+from virtus.pipeline.calibrate import capture_dirs
 from virtus.reconstruct import points_from_decoded
 from virtus.scanner import Scanner
 from virtus.sensor.camera import Sensor
@@ -208,6 +203,8 @@ def validate_twin(
     ------
     InputError : no board known, captures of another size than the calibration's camera.
     """
+    from virtus.render.settings import RenderSettings
+
     poses: dict[str, Pose] = {}
     board_data = None
     if isinstance(calibration, Rig):
@@ -244,7 +241,7 @@ def validate_twin(
             rig=rig,
             sequence=real.sequence,
             sensor=real.sensor or Sensor().with_(bit_depth=real.bit_depth),
-            spp=spp,
+            render=RenderSettings(spp=spp),
         )
         virtual = scanner.capture(board_scene(the_board, BoardPose(name, board2cam), texture))
         per_pose.append(compare_captures(rig, the_board, board2cam, real, virtual, name))

@@ -4,6 +4,11 @@ One ray-tracing pass per pose, every frame of a pattern sequence synthesised fro
 by the camera model of :mod:`virtus.sensor.camera`, with :mod:`virtus.capture.groundtruth` from the
 same pass:
 
+* :mod:`~virtus.render.settings` -- :class:`RenderSettings`, how a pose is rendered (spp,
+  variant, bounces, lenses, aperture samples): one plain value that :func:`render`,
+  :func:`render_device` and :class:`virtus.scanner.Scanner` take (no Mitsuba in it).
+* :mod:`~virtus.render.renderer` -- :func:`render`: one pose, every frame and its ground
+  truth, from a rig, a scene, a sequence, the projector and sensor models and the settings.
 * :mod:`~virtus.render.backend` -- Mitsuba variant choice (CUDA if it works, else LLVM).
 * :mod:`~virtus.render.mitsuba_scene` -- virtus scene -> Mitsuba shapes and BSDFs.
 * :mod:`~virtus.render.tracing` -- camera rays, hits, projector coordinates, shading.
@@ -22,6 +27,7 @@ same pass:
 from virtus.render.backend import choose_variant
 from virtus.render.jit.tracing import DeviceFrames, DeviceTrace, trace_device
 from virtus.render.renderer import DeviceRendering, Rendering, render, render_device
+from virtus.render.settings import RenderSettings
 from virtus.render.synthesis import synthesize
 from virtus.render.tracing import Trace, trace
 
@@ -29,6 +35,7 @@ __all__ = [
     "DeviceFrames",
     "DeviceRendering",
     "DeviceTrace",
+    "RenderSettings",
     "Rendering",
     "Trace",
     "choose_variant",

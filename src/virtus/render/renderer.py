@@ -21,11 +21,12 @@ from virtus.render.jit.tracing import (
     percentile_of_positive,
     trace_device,
 )
+from virtus.render.settings import RenderSettings
 from virtus.render.synthesis import synthesize
 from virtus.render.tracing import trace
 from virtus.scene.model import Scene
 from virtus.sensor.camera import NO_LIGHT, Sensor, as_seed
-from virtus.sensor.projector import ProjectorModel, as_lookup
+from virtus.sensor.projector import ProjectorModel
 
 #: Where frames are synthesised (see :func:`render`).
 SYNTHESIS = ("auto", "sparse", "jit")
@@ -138,15 +139,26 @@ class DeviceRendering:
         return Rendering.settings_of(self, None, None).metadata()
 
 
+def _trace_options(settings: RenderSettings, cam2world: Pose | None) -> dict[str, Any]:
+    """The keywords of :func:`virtus.render.tracing.trace` (and ``trace_device``) for one
+    pose rendered with ``settings``."""
+    return {
+        "spp": settings.spp, "cam2world": cam2world, "variant": settings.variant,
+        "bounces": settings.bounces, "projector_lens": settings.projector_lens,
+        "camera_lens": settings.camera_lens, "aperture_samples": settings.aperture_samples,
+    }  # fmt: skip
+
+
 def render_device(
     rig: Rig,
     scene: Scene,
     sequence: Any,
+    settings: RenderSettings | None = None,
     *,
     projector: ProjectorModel,
     sensor: Sensor,
     seed: int = 0,
-    **options: Any,
+    cam2world: Pose | None = None,
 ) -> DeviceRendering:
     """:func:`render` without leaving the device: trace, synthesis and the sensor run where
     Mitsuba runs (a GPU with ``cuda_ad_rgb``; the CPU with ``llvm_ad_rgb``, the twin the
@@ -155,11 +167,12 @@ def render_device(
 
     Parameters
     ----------
-    rig, scene, sequence, projector, sensor : as :func:`render` (objects, not names).
+    rig, scene, sequence, settings, projector, sensor, cam2world : as :func:`render`
+        (objects, not names).
     seed : seed of the sensor's noise streams.
-    options : ``spp``, ``cam2world``, ``variant``, ``bounces``, ``projector_lens``,
-        ``camera_lens``, ``aperture_samples`` of :func:`virtus.render.tracing.trace`.
     """
+    settings = RenderSettings() if settings is None else settings
+    options = _trace_options(settings, cam2world)
     traced = trace_device(rig, scene, **options)
     if sensor.vignetting != "none":
         mi, _, _ = mitsuba(traced.variant)
@@ -175,8 +188,8 @@ def render_device(
     )
     return DeviceRendering(
         frames=frames, trace=traced, exposure=float(exposure), sensor=sensor, seed=seed,
-        projector=projector, projector_lens=options.get("projector_lens"),
-        camera_lens=options.get("camera_lens"),
+        projector=projector, projector_lens=settings.projector_lens,
+        camera_lens=settings.camera_lens,
     )  # fmt: skip
 
 
@@ -184,23 +197,15 @@ def render(
     rig: Rig,
     scene: Scene,
     sequence: Any,
+    settings: RenderSettings | None = None,
     *,
-    spp: int = 4,
-    lookup: str | None = None,
     projector: ProjectorModel | None = None,
-    exposure: float | Literal["auto"] = "auto",
-    bit_depth: int = 8,
-    variant: str | None = None,
+    sensor: Sensor | None = None,
     rng: np.random.Generator | int | None = None,
     cam2world: Pose | None = None,
-    sensor: Sensor | None = None,
     synthesis: Literal["auto", "sparse", "jit"] = "auto",
     threads: int | None = None,
     block_pixels: int | None = None,
-    bounces: int = 1,
-    projector_lens: ThinLens | None = None,
-    camera_lens: ThinLens | None = None,
-    aperture_samples: int | None = None,
 ) -> Rendering:
     """Render every frame of ``sequence`` for one pose from a single ray-tracing pass.
 
@@ -209,54 +214,44 @@ def render(
     rig : camera, projector and ``proj2cam`` (virtus.geometry.devices).
     scene : the scene (virtus.scene.model); world frame = camera frame unless ``cam2world``.
     sequence : pattern sequence (virtus.patterns) with ``frames`` and ``profile(i)``.
-    spp : supersamples per pixel, a perfect square (stratified grid centred on the pixel).
-    lookup : projector pixel model of an otherwise ideal projector: ``"nearest"`` (DMD pixels,
-        the default) or ``"bilinear"``; shorthand for ``projector=ProjectorModel(pixel=...)``.
+    settings : the render settings (:class:`~virtus.render.settings.RenderSettings`: spp,
+        Mitsuba variant, bounces, lenses, aperture samples; default ``RenderSettings()``:
+        4 spp, automatic variant, direct light through pinholes).
     projector : the projector model (:class:`virtus.sensor.projector.ProjectorModel`: response,
-        black level, pixel PSF, fall-off); give it or ``lookup``, not both.
-    exposure : ``"auto"`` (white frame's 99th percentile at 90 % of full scale) or digital
-        numbers per unit radiance (see :mod:`virtus.sensor.camera`).
-    bit_depth : 8, 10, 12 or 16.
-    variant : Mitsuba variant; default ``$VIRTUS_MITSUBA_VARIANT`` or automatic.
+        black level, pixel model and PSF, fall-off); default: ideal sharp DMD pixels.
+    sensor : the camera model (:class:`~virtus.sensor.camera.Sensor`: bit depth, exposure,
+        EMVA 1288); default ``Sensor()``: 8 bits, auto exposure (the white frame's 99th
+        percentile at 90 % of full scale), noiseless.
     rng : seed of the sensor's counter-based noise streams (see
-    :func:`virtus.sensor.camera.as_seed`).
+        :func:`virtus.sensor.camera.as_seed`).
     cam2world : camera pose in the scene's world frame (default identity).
-    sensor : a full :class:`~virtus.sensor.camera.Sensor` (overrides ``exposure`` and
-    ``bit_depth``).
     synthesis : where frames are synthesised: ``"sparse"`` (scipy sparse products on the
         host, fastest on CPUs), ``"jit"`` (the device-resident path of :func:`render_device`,
         then one copy to the host; fastest on GPUs), ``"auto"`` (``"jit"`` for CUDA variants,
         else ``"sparse"``). Same frames but for 1 DN where a value sits on a rounding edge.
     threads, block_pixels : host synthesis threads and block size (the frames do not depend
         on them; defaults: every CPU, 16384 pixels).
-    bounces, projector_lens, camera_lens, aperture_samples : light transport and lenses, as
-        :func:`virtus.render.tracing.trace` (interreflections, projector defocus, camera depth
-        of field); the defaults are direct light through pinholes.
 
     Returns
     -------
     :class:`Rendering` with frames (F, H, W) and ground truth.
     """
-    sensor = sensor or Sensor(bit_depth=bit_depth, exposure=exposure)
+    settings = RenderSettings() if settings is None else settings
+    sensor = sensor or Sensor()
     if projector is None:
-        projector = ProjectorModel(pixel=as_lookup(lookup or "nearest"))
-    elif lookup is not None and as_lookup(lookup) != projector.pixel:
-        raise InputError("lookup", f"the projector's pixel model {projector.pixel.value!r}", lookup)
+        projector = ProjectorModel()
     lookup = projector.pixel.value
     intrinsics = rig.projector.intrinsics
     if synthesis not in SYNTHESIS:
         raise InputError("synthesis", f"one of {SYNTHESIS}", synthesis)
     seed = as_seed(rng)
-    options = {
-        "spp": spp, "cam2world": cam2world, "variant": variant, "bounces": bounces,
-        "projector_lens": projector_lens, "camera_lens": camera_lens,
-        "aperture_samples": aperture_samples,
-    }  # fmt: skip
-    on_device = synthesis == "jit" or (synthesis == "auto" and on_gpu(variant))
+    options = _trace_options(settings, cam2world)
+    on_device = synthesis == "jit" or (synthesis == "auto" and on_gpu(settings.variant))
     if on_device:
         device = render_device(
-            rig, scene, sequence, projector=projector, sensor=sensor, seed=seed, **options
-        )
+            rig, scene, sequence, settings, projector=projector, sensor=sensor, seed=seed,
+            cam2world=cam2world,
+        )  # fmt: skip
         return device.to_rendering()
     traced = trace(rig, scene, **options)
     if sensor.vignetting != "none":
@@ -294,6 +289,6 @@ def render(
         projector=projector,
         bounces=traced.bounces,
         aperture_samples=traced.aperture_samples,
-        projector_lens=projector_lens,
-        camera_lens=camera_lens,
+        projector_lens=settings.projector_lens,
+        camera_lens=settings.camera_lens,
     )

@@ -32,6 +32,7 @@ from virtus.scene.model import (
     load_scene,
     load_texture,
 )
+from virtus.scene.presets import AMBIENTS, MATERIALS, sphere_scene
 from virtus.scene.procedural import (
     FREEFORM_SEED,
     freeform_object,
@@ -39,12 +40,14 @@ from virtus.scene.procedural import (
 )
 
 __all__ = [
+    "AMBIENTS",
     "AreaLight",
     "BUILTIN_SCENES",
     "BoxObject",
     "EnvironmentLight",
     "FREEFORM_CENTRE_M",
     "FREEFORM_SEED",
+    "MATERIALS",
     "MAX_AMBIENT",
     "MAX_LENGTH_M",
     "MAX_MESH_BYTES",
@@ -62,5 +65,6 @@ __all__ = [
     "freeform_scene",
     "load_scene",
     "load_texture",
+    "sphere_scene",
     "write_freeform_object",
 ]

@@ -42,7 +42,6 @@ import numpy as np
 from virtus.checks import finite, positive, positive_int
 from virtus.errors import InputError, VirtusError
 from virtus.patterns import (
-    _RESIDUAL_INVALID_RAD,
     CODE_FLAG_RAD,
     DIRECTIONS,
     RESIDUAL_FLAG_RAD,
@@ -52,6 +51,7 @@ from virtus.patterns import (
     PatternSequence,
 )
 from virtus.patterns import phase as _phase
+from virtus.patterns.decode import _RESIDUAL_INVALID_RAD
 from virtus.render.backend import mitsuba, variant_of
 
 __all__ = ["DeviceDecode", "decode_on_device", "frames_to_device", "supports"]
