@@ -20,7 +20,8 @@ from virtus.render.jit.tracing import DeviceFrames, percentile_of_positive, trac
 from virtus.render.renderer import render_device
 from virtus.render.tracing import trace
 from virtus.scene.model import default_scene
-from virtus.sensor.camera import SENSOR_PRESETS, Sensor, standard_normal
+from virtus.sensor.camera import SENSOR_PRESETS, Sensor
+from virtus.sensor.noise import standard_normal
 from virtus.sensor.projector import PROJECTOR_PRESETS, ProjectorModel
 
 VARIANT = "llvm_ad_rgb"

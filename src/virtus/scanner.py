@@ -21,7 +21,8 @@ from virtus.errors import InputError
 from virtus.geometry.devices import Rig, default_rig
 from virtus.geometry.transforms import Pose
 from virtus.patterns import DecodeResult, PatternSequence, default_sequence
-from virtus.sensor.camera import Sensor, as_seed
+from virtus.sensor.camera import Sensor
+from virtus.sensor.noise import as_seed
 from virtus.sensor.projector import Lookup, ProjectorModel
 
 if TYPE_CHECKING:

@@ -44,7 +44,7 @@ from virtus.data.config import DatasetConfig, ObjectSource
 from virtus.errors import InputError
 from virtus.geometry.transforms import Pose
 from virtus.io.runs import atomic_write
-from virtus.sensor.camera import MAX_SEED
+from virtus.sensor.noise import MAX_SEED
 
 __all__ = ["ObjectRecord", "Randomiser", "SampleSpec", "build_rig", "candidate_sequences"]
 

@@ -25,7 +25,8 @@ from virtus.render.settings import RenderSettings
 from virtus.render.synthesis import synthesize
 from virtus.render.tracing import trace
 from virtus.scene.model import Scene
-from virtus.sensor.camera import NO_LIGHT, Sensor, as_seed
+from virtus.sensor.camera import NO_LIGHT, Sensor
+from virtus.sensor.noise import as_seed
 from virtus.sensor.projector import ProjectorModel
 
 #: Where frames are synthesised (see :func:`render`).

@@ -520,14 +520,14 @@ class Pass:
         return self.n_pixels * self.spp
 
     @property
-    def taps(self) -> int:
+    def taps_per_sample(self) -> int:
         """Taps per camera supersample, ``bounces * aperture_samples``."""
         return self.bounces * self.aperture_samples
 
     @property
     def chunk(self) -> int:
         """Supersamples per Mitsuba call (a whole number of pixels)."""
-        return max(self.spp, _RAYS_PER_CHUNK // (self.spp * self.taps) * self.spp)
+        return max(self.spp, _RAYS_PER_CHUNK // (self.spp * self.taps_per_sample) * self.spp)
 
     def options(self) -> dict[str, Any]:
         """Keyword arguments of :meth:`_Tracer.samples_device` besides the rays."""
@@ -715,7 +715,7 @@ def trace(
     truth = centre_truth(ps)
 
     # ---- supersamples: taps of projector coordinates and white-projector radiance ----
-    taps, step = ps.taps, ps.chunk
+    taps, step = ps.taps_per_sample, ps.chunk
     parts = [
         tracer.samples(sample_dirs[:, i : i + step], i, **ps.options())
         for i in range(0, n_rays, step)

@@ -3,17 +3,11 @@
 * :mod:`~virtus.sensor.camera` -- the EMVA 1288 camera (``Sensor``) and its presets.
 * :mod:`~virtus.sensor.projector` -- projector response, pixel shape, lens blur
   (``ProjectorModel``).
-* :mod:`~virtus.sensor.noise` -- counter-based random streams keyed by (seed, frame, pixel block).
+* :mod:`~virtus.sensor.noise` -- counter-based random streams keyed by (seed, frame, pixel).
 """
 
-from virtus.sensor.camera import (
-    Sensor,
-    as_seed,
-    load_sensor,
-    pcg4d,
-    standard_normal,
-    stream_key,
-)
+from virtus.sensor.camera import SENSOR_PRESETS, Sensor, load_sensor
+from virtus.sensor.noise import MAX_SEED, NOISE_STREAM, as_seed, pcg4d, standard_normal, stream_key
 from virtus.sensor.projector import (
     Lookup,
     ProjectorModel,
@@ -22,6 +16,9 @@ from virtus.sensor.projector import (
 )
 
 __all__ = [
+    "MAX_SEED",
+    "NOISE_STREAM",
+    "SENSOR_PRESETS",
     "Lookup",
     "ProjectorModel",
     "Sensor",

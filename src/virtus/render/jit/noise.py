@@ -16,7 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from virtus.sensor.camera import UNIFORM_SCALE, Sensor, pcg4d, stream_key
+from virtus.sensor.camera import Sensor
+from virtus.sensor.noise import UNIFORM_SCALE, pcg4d, stream_key
 
 
 def frame_keys(mi: Any, seed: int, frames: np.ndarray) -> tuple[Any, Any]:

@@ -88,7 +88,7 @@ def synthesize_on_device(
     """
     projector = as_projector(projector)
     mi, dr = trace.modules()
-    n_frames, n_pixels, taps = len(sequence.frames), trace.n_pixels, trace.taps
+    n_frames, n_pixels, taps = len(sequence.frames), trace.n_pixels, trace.taps_per_pixel
     table, offset, length, axis = _profile_table(trace, sequence, projector)
     table_dr, offset_dr = mi.Float(table), mi.UInt32(offset)
     length_dr, axis_dr = mi.Float(length.astype(np.float32)), mi.UInt32(axis)

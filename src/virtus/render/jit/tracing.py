@@ -178,7 +178,7 @@ class DeviceTrace:
         return self.bounces * self.aperture_samples
 
     @property
-    def taps(self) -> int:
+    def taps_per_pixel(self) -> int:
         """Taps per pixel, S = spp * bounces * aperture_samples."""
         return self.spp * self.taps_per_sample
 
@@ -190,14 +190,14 @@ class DeviceTrace:
     def white(self) -> Any:
         """Float (P,) radiance under a full-on projector, ambient included."""
         _, dr = self.modules()
-        white = dr.block_sum(self.weight, self.taps)
+        white = dr.block_sum(self.weight, self.taps_per_pixel)
         return white if self.ambient is None else white + self.ambient
 
     def scaled(self, gain: Any) -> DeviceTrace:
         """A copy whose weights and ambient are multiplied per pixel by ``gain`` (Float
         (P,), e.g. the camera's vignetting)."""
         mi, dr = self.modules()
-        pixel = dr.arange(mi.UInt32, self.n_pixels * self.taps) // self.taps
+        pixel = dr.arange(mi.UInt32, self.n_pixels * self.taps_per_pixel) // self.taps_per_pixel
         weight = self.weight * dr.gather(mi.Float, gain, pixel)
         ambient = None if self.ambient is None else self.ambient * gain
         dr.eval(weight, ambient)
@@ -215,7 +215,7 @@ class DeviceTrace:
             for sample in range(self.spp):
                 for j in range(aperture):
                     column = sample * per_sample + vertex * aperture + j
-                    total += dr.gather(mi.Float, self.weight, pixel * self.taps + column)
+                    total += dr.gather(mi.Float, self.weight, pixel * self.taps_per_pixel + column)
             rows.append(total)
         out = dr.zeros(mi.Float, self.bounces * self.n_pixels)
         for vertex, row in enumerate(rows):
@@ -379,7 +379,7 @@ def trace_device(
     )  # fmt: skip
     mi, dr = ps.mi, ps.dr
     directions = _device_directions(ps.variant, ps.camera, ps.spp)
-    taps, n_rays = ps.taps, ps.n_rays
+    taps, n_rays = ps.taps_per_sample, ps.n_rays
     size = n_rays * taps
     weight, u_p, v_p = (dr.zeros(mi.Float, size) for _ in range(3))
     per_sample: dict[str, Any] = {}
