@@ -73,3 +73,27 @@ def test_patterns_writes_any_sequence_it_is_given(tmp_path, capsys) -> None:
     written, _ = load_sequence_file(tmp_path / "p" / "sequence.json")
     assert written == load_sequence_file(example)[0]
     assert len(list((tmp_path / "p").glob("*.png"))) == 52
+
+
+def test_capture_takes_a_built_in_scene_as_scan_does(tmp_path, monkeypatch, capsys) -> None:
+    # `virtus capture --scene freeform` renders the built-in free-form object, its mesh
+    # written into (and owned by) the run's directory, as `virtus scan --scene freeform` does.
+    import json
+
+    from tests.support import small_rig
+    from virtus.capture.capture import Capture
+
+    monkeypatch.chdir(tmp_path)
+    rig = small_rig().save_json(tmp_path / "rig.json")
+    out = tmp_path / "cap"
+    argv = ["capture", "--scene", "freeform", "--rig", str(rig), "--spp", "1", "--out", str(out)]
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    assert exit_info.value.code == 0, capsys.readouterr().err
+    record = json.loads((out / "run.json").read_text())
+    assert record["command"] == "capture" and record["status"] == "complete"
+    assert record["config"]["scene"] == "freeform" and "freeform.stl" in record["files"]
+    assert (out / "freeform.stl").is_file()
+    capture = Capture.load(out)
+    assert capture.ground_truth.mask_hit.any()
+    assert [type(o).__name__ for o in capture.scene.objects] == ["MeshObject"]

@@ -319,7 +319,7 @@ PHOTON_TRANSFER_INTERCEPT_REL = 0.10
 #: the standard deviation to ~0.3 %).
 PHASE_NOISE_REL = 0.05
 
-# --- render: light transport (tests/test_light_transport.py) ----------------------------
+# --- render: light transport (tests/render/test_light_transport.py) ---------------------
 #: band means (4 bands of 80 x 20 px) of multi-bounce frames in a 90 deg corner of albedo-0.9
 #: walls vs Mitsuba's path tracer (64 spp each, different random paths): Monte Carlo noise of
 #: ~100k paths per band, measured <= 0.6 % (bounces 2 and 3, white and a phase frame). The
@@ -364,8 +364,9 @@ LIGHTS_MITSUBA_REL = 0.02
 #: of a per-sample relative noise ~0.33, i.e. 0.2 % standard error.
 ENVIRONMENT_MEAN_REL = 0.01
 
-# --- calibration from captures, checkerboards, twins, USD (tests/test_real_calibration.py,
-# tests/test_twin.py, tests/test_usd.py) --------------------------------------------------
+# --- calibration from captures, checkerboards, twins, USD
+# (tests/pipeline/test_calibrate_captures.py, tests/pipeline/test_twin.py,
+# tests/twin/test_usd.py) -------------------------------------------------------------------
 #: calibration from imported captures vs the rendered job on the same renders: the same
 #: float64 observations through the same solver on one thread (measured exactly 0); the
 #: issue's 1e-6 px and 1e-9 m.

@@ -8,6 +8,21 @@ that makes them.
 
 from __future__ import annotations
 
+__all__ = [
+    "C2M_MAE_MM",
+    "CAMERA_ISAAC_APERTURE",
+    "CAMERA_ISAAC_FOCAL",
+    "CAMERA_PIXEL_SIZE_MM",
+    "CAMERA_SIZE_PX",
+    "DEMO",
+    "IMAGES_PER_S",
+    "PROJECTOR_CENTRE_M",
+    "PROJECTOR_SIZE_AT_1M_M",
+    "PROJECTOR_SIZE_PX",
+    "RMS_PX",
+    "WORKING_DISTANCE_M",
+]
+
 #: Camera: Isaac focal length 50 and horizontal aperture 20.9995 (same length unit).
 CAMERA_ISAAC_FOCAL = 50.0
 CAMERA_ISAAC_APERTURE = 20.9995

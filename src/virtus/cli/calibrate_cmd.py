@@ -4,23 +4,18 @@ calibrate a real rig from its captures (:func:`virtus.pipeline.calibrate.calibra
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
 from virtus.cli.options import (
-    BitDepthOption,
-    LookupOption,
     OverwriteOption,
-    ProjectorOption,
-    RigOption,
+    ScannerOptions,
     SeedOption,
-    SensorOption,
-    SequenceOption,
-    SppOption,
-    VariantOption,
-    build_scanner,
+    scanner_options,
 )
 
 DEFAULT_OUT = Path("virtus-calibration")
@@ -31,120 +26,120 @@ BOARD_HELP = (
 )
 
 
+@scanner_options(omit=("bounces", "projector_lens", "camera_lens"))
+def calibrate(
+    *,
+    out: Annotated[Path, typer.Option(help="Output directory.")] = DEFAULT_OUT,
+    board: Annotated[str, typer.Option(help=BOARD_HELP)] = "7x13",
+    captures: Annotated[
+        list[Path] | None,
+        typer.Option(
+            "--captures",
+            help="Calibrate from these captures instead of rendering: capture directories "
+            "(one per board pose, `virtus import`) or folders of them; more may follow "
+            "as arguments (--captures DIR [DIR ...]).",
+        ),
+    ] = None,
+    more_captures: Annotated[
+        list[Path] | None, typer.Argument(help="More capture directories (with --captures).")
+    ] = None,
+    poses: Annotated[
+        str, typer.Option(help="'paper' (18 poses) or 'random:N' (3 <= N <= 200).")
+    ] = "paper",
+    options: ScannerOptions,
+    seed: SeedOption = 0,
+    overwrite: OverwriteOption = False,
+    resume: Annotated[
+        bool,
+        typer.Option(
+            "--resume",
+            help="Continue an interrupted run in OUT (same settings) from its finished poses.",
+        ),
+    ] = False,
+) -> None:
+    """Render the board in every pose (the whole pattern sequence each), calibrate camera,
+    projector and their pose, and write OUT/calibration.json (+ OpenCV YAML and the
+    paper's txt files). Identical runs write identical files; OUT/run.json records the
+    run, OUT/timing.json its timings."""
+    import warnings
+
+    from rich.console import Console
+
+    from virtus.calib import board_from_spec
+    from virtus.calib.result import CALIBRATION_FILE
+    from virtus.errors import InputError
+    from virtus.pipeline.calibrate import (
+        calibrate_captures,
+        calibrate_rig,
+        capture_dirs,
+        check_pose_spec,
+    )
+    from virtus.sensor import as_seed
+
+    # Cheap checks first: nothing is read, rendered or written before they pass.
+    the_board = board_from_spec(board)
+    if more_captures and not captures:
+        raise InputError("arguments", "capture directories only after --captures", more_captures)
+    from_captures = capture_dirs([*captures, *(more_captures or [])]) if captures else None
+    if from_captures is None:
+        poses = check_pose_spec(poses)
+        seed = as_seed(seed)
+        scanner = options.build()
+    console = Console()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with _progress_bar(console) as progress:
+            if from_captures is not None:
+                if resume:
+                    raise InputError("--resume", "a rendered run (not --captures)", True)
+                result = calibrate_captures(
+                    from_captures,
+                    board=the_board,
+                    progress=progress,
+                    out_dir=out,
+                    overwrite=overwrite,
+                )
+            else:
+                result = calibrate_rig(
+                    scanner,
+                    board=the_board,
+                    poses=poses,
+                    rng=seed,
+                    progress=progress,
+                    out_dir=out,
+                    resume=resume,
+                    overwrite=overwrite,
+                )
+    for warning in caught:
+        console.print(f"[yellow]warning:[/yellow] {warning.message}")
+    _print_summary(console, result.to_dict())
+    console.print(f"wrote {out / CALIBRATION_FILE}")
+
+
 def register(app: typer.Typer) -> None:
-    @app.command("calibrate")
-    def calibrate(
-        out: Annotated[Path, typer.Option(help="Output directory.")] = DEFAULT_OUT,
-        rig: RigOption = None,
-        sequence: SequenceOption = None,
-        board: Annotated[str, typer.Option(help=BOARD_HELP)] = "7x13",
-        captures: Annotated[
-            list[Path] | None,
-            typer.Option(
-                "--captures",
-                help="Calibrate from these captures instead of rendering: capture directories "
-                "(one per board pose, `virtus import`) or folders of them; more may follow "
-                "as arguments (--captures DIR [DIR ...]).",
-            ),
-        ] = None,
-        more_captures: Annotated[
-            list[Path] | None, typer.Argument(help="More capture directories (with --captures).")
-        ] = None,
-        poses: Annotated[
-            str, typer.Option(help="'paper' (18 poses) or 'random:N' (3 <= N <= 200).")
-        ] = "paper",
-        spp: SppOption = 4,
-        lookup: LookupOption = None,
-        projector: ProjectorOption = "ideal",
-        bit_depth: BitDepthOption = None,
-        sensor: SensorOption = "ideal",
-        seed: SeedOption = 0,
-        variant: VariantOption = None,
-        overwrite: OverwriteOption = False,
-        resume: Annotated[
-            bool,
-            typer.Option(
-                "--resume",
-                help="Continue an interrupted run in OUT (same settings) from its finished poses.",
-            ),
-        ] = False,
-    ) -> None:
-        """Render the board in every pose (the whole pattern sequence each), calibrate camera,
-        projector and their pose, and write OUT/calibration.json (+ OpenCV YAML and the
-        paper's txt files). Identical runs write identical files; OUT/run.json records the
-        run, OUT/timing.json its timings."""
-        import warnings
+    app.command("calibrate")(calibrate)
 
-        from rich.console import Console
-        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-        from virtus.calib.board import board_from_spec
-        from virtus.calib.result import CALIBRATION_FILE
-        from virtus.errors import InputError
-        from virtus.pipeline.calibrate import (
-            calibrate_captures,
-            calibrate_rig,
-            capture_dirs,
-            check_pose_spec,
-        )
-        from virtus.sensor.camera import as_seed
+@contextlib.contextmanager
+def _progress_bar(console: Any) -> Iterator[Callable[[int, int, str], None]]:
+    """A progress bar of the captured poses, shown while the block runs; yields the
+    ``progress(done, total, name)`` callback of the calibration jobs."""
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-        # Cheap checks first: nothing is read, rendered or written before they pass.
-        the_board = board_from_spec(board)
-        if more_captures and not captures:
-            raise InputError(
-                "arguments", "capture directories only after --captures", more_captures
-            )
-        from_captures = capture_dirs([*captures, *(more_captures or [])]) if captures else None
-        if from_captures is None:
-            poses = check_pose_spec(poses)
-            seed = as_seed(seed)
-            scanner = build_scanner(
-                rig=rig, sequence=sequence, lookup=lookup, projector=projector, spp=spp,
-                bit_depth=bit_depth,
-                sensor=sensor, variant=variant,
-            )  # fmt: skip
-        console = Console()
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            with Progress(
-                TextColumn("[bold]capture"),
-                BarColumn(),
-                TextColumn("{task.completed}/{task.total}"),
-                TextColumn("{task.description}"),
-                TimeElapsedColumn(),
-                console=console,
-            ) as bar:
-                task = bar.add_task("", total=None)
+    with Progress(
+        TextColumn("[bold]capture"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total}"),
+        TextColumn("{task.description}"),
+        TimeElapsedColumn(),
+        console=console,
+    ) as bar:
+        task = bar.add_task("", total=None)
 
-                def progress(done: int, total: int, name: str) -> None:
-                    bar.update(task, completed=done, total=total, description=name)
+        def progress(done: int, total: int, name: str) -> None:
+            bar.update(task, completed=done, total=total, description=name)
 
-                if from_captures is not None:
-                    if resume:
-                        raise InputError("--resume", "a rendered run (not --captures)", True)
-                    result = calibrate_captures(
-                        from_captures,
-                        board=the_board,
-                        progress=progress,
-                        out_dir=out,
-                        overwrite=overwrite,
-                    )
-                else:
-                    result = calibrate_rig(
-                        scanner,
-                        board=the_board,
-                        poses=poses,
-                        rng=seed,
-                        progress=progress,
-                        out_dir=out,
-                        resume=resume,
-                        overwrite=overwrite,
-                    )
-        for warning in caught:
-            console.print(f"[yellow]warning:[/yellow] {warning.message}")
-        _print_summary(console, result.to_dict())
-        console.print(f"wrote {out / CALIBRATION_FILE}")
+        yield progress
 
 
 def _print_summary(console: Any, data: dict[str, Any]) -> None:

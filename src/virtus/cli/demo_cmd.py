@@ -7,110 +7,88 @@ from typing import Annotated, Any
 
 import typer
 
-from virtus.cli.options import (
-    BouncesOption,
-    CameraLensOption,
-    LookupOption,
-    OverwriteOption,
-    ProjectorLensOption,
-    ProjectorOption,
-    RigOption,
-    SensorOption,
-    SequenceOption,
-    SppOption,
-    VariantOption,
-    build_scanner,
-)
+from virtus.cli.options import OverwriteOption, ScannerOptions, scanner_options
+
+
+@scanner_options(omit=("bit_depth",))
+def demo(
+    *,
+    out: Annotated[Path, typer.Option(help="Output directory.")] = Path("virtus-demo"),
+    options: ScannerOptions,
+    overwrite: OverwriteOption = False,
+    resume: Annotated[
+        bool,
+        typer.Option(
+            "--resume/--no-resume",
+            help="Continue an earlier demo in OUT with the same settings, keeping its "
+            "finished poses and capture (default; a finished demo is re-measured in "
+            "seconds). --no-resume refuses a directory that holds a run.",
+        ),
+    ] = True,
+) -> None:
+    """Calibrate the paper's rig with its 18 board poses, capture the 100 mm sphere,
+    reconstruct it with the calibrated parameters, fit a sphere, and compare with the
+    paper. Writes OUT/metrics.json, OUT/calibration/ (calibration.json, YAML, paper
+    txt), OUT/scan/ (capture + points.ply). OUT is owned by the run (OUT/run.json):
+    a demo with other settings, or another command's directory, is refused unless
+    --overwrite; the same demo again continues where it stopped."""
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+    )
+
+    from virtus.pipeline.demo import run_demo
+    from virtus.render.settings import RenderSettings
+    from virtus.scanner import Scanner
+
+    scanner = options.build()
+    console = Console()
+    with Progress(
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        TimeElapsedColumn(),
+        console=console,
+    ) as bar:
+        task = bar.add_task("calibration", total=None)
+
+        def progress(step: str, done: int | None = None, total: int | None = None) -> None:
+            if done is None:
+                bar.update(task, description=step)
+            else:
+                # the count lives in the description so later steps do not inherit it
+                bar.update(task, description=f"{step} ({done}/{total} board poses)",
+                           completed=done, total=total)  # fmt: skip
+
+        result = run_demo(
+            out,
+            progress=progress,
+            scanner=scanner,
+            overwrite=overwrite,
+            resume=resume and not overwrite,
+        )
+        # With realism on, the same experiment with an ideal sensor and projector is run
+        # beside it (OUT/ideal/, its own run) and printed side by side.
+        plain = RenderSettings(spp=scanner.render.spp, variant=scanner.render.variant)
+        ideal = Scanner(rig=scanner.rig, sequence=scanner.sequence, render=plain)
+        reference = None
+        if scanner != ideal:
+            bar.update(task, description="ideal reference")
+            reference = run_demo(
+                out / IDEAL_DIR, progress=progress, scanner=ideal, overwrite=overwrite,
+                resume=resume and not overwrite,
+            ).metrics  # fmt: skip
+    _print_table(console, result.metrics, reference)
+    console.print(f"wrote {out / 'metrics.json'}, {out / 'calibration' / 'calibration.json'}, "
+                  f"{out / 'scan' / 'points.ply'}")  # fmt: skip
+    if reference is not None:
+        console.print(f"ideal reference: {out / IDEAL_DIR / 'metrics.json'}")
 
 
 def register(app: typer.Typer) -> None:
-    @app.command("demo")
-    def demo(
-        out: Annotated[Path, typer.Option(help="Output directory.")] = Path("virtus-demo"),
-        lookup: LookupOption = None,
-        projector: ProjectorOption = "ideal",
-        rig: RigOption = None,
-        sequence: SequenceOption = None,
-        spp: SppOption = 4,
-        sensor: SensorOption = "ideal",
-        variant: VariantOption = None,
-        bounces: BouncesOption = 1,
-        projector_lens: ProjectorLensOption = None,
-        camera_lens: CameraLensOption = None,
-        overwrite: OverwriteOption = False,
-        resume: Annotated[
-            bool,
-            typer.Option(
-                "--resume/--no-resume",
-                help="Continue an earlier demo in OUT with the same settings, keeping its "
-                "finished poses and capture (default; a finished demo is re-measured in "
-                "seconds). --no-resume refuses a directory that holds a run.",
-            ),
-        ] = True,
-    ) -> None:
-        """Calibrate the paper's rig with its 18 board poses, capture the 100 mm sphere,
-        reconstruct it with the calibrated parameters, fit a sphere, and compare with the
-        paper. Writes OUT/metrics.json, OUT/calibration/ (calibration.json, YAML, paper
-        txt), OUT/scan/ (capture + points.ply). OUT is owned by the run (OUT/run.json):
-        a demo with other settings, or another command's directory, is refused unless
-        --overwrite; the same demo again continues where it stopped."""
-        from rich.console import Console
-        from rich.progress import (
-            BarColumn,
-            Progress,
-            TextColumn,
-            TimeElapsedColumn,
-        )
-
-        from virtus.pipeline.demo import run_demo
-        from virtus.render.settings import RenderSettings
-        from virtus.scanner import Scanner
-
-        scanner = build_scanner(
-            rig=rig, sequence=sequence, lookup=lookup, projector=projector, spp=spp, sensor=sensor,
-            variant=variant, bounces=bounces, projector_lens=projector_lens,
-            camera_lens=camera_lens,
-        )  # fmt: skip
-        console = Console()
-        with Progress(
-            TextColumn("[bold]{task.description}"),
-            BarColumn(),
-            TimeElapsedColumn(),
-            console=console,
-        ) as bar:
-            task = bar.add_task("calibration", total=None)
-
-            def progress(step: str, done: int | None = None, total: int | None = None) -> None:
-                if done is None:
-                    bar.update(task, description=step)
-                else:
-                    # the count lives in the description so later steps do not inherit it
-                    bar.update(task, description=f"{step} ({done}/{total} board poses)",
-                               completed=done, total=total)  # fmt: skip
-
-            result = run_demo(
-                out,
-                progress=progress,
-                scanner=scanner,
-                overwrite=overwrite,
-                resume=resume and not overwrite,
-            )
-            # With realism on, the same experiment with an ideal sensor and projector is run
-            # beside it (OUT/ideal/, its own run) and printed side by side.
-            plain = RenderSettings(spp=scanner.render.spp, variant=scanner.render.variant)
-            ideal = Scanner(rig=scanner.rig, sequence=scanner.sequence, render=plain)
-            reference = None
-            if scanner != ideal:
-                bar.update(task, description="ideal reference")
-                reference = run_demo(
-                    out / IDEAL_DIR, progress=progress, scanner=ideal, overwrite=overwrite,
-                    resume=resume and not overwrite,
-                ).metrics  # fmt: skip
-        _print_table(console, result.metrics, reference)
-        console.print(f"wrote {out / 'metrics.json'}, {out / 'calibration' / 'calibration.json'}, "
-                      f"{out / 'scan' / 'points.ply'}")  # fmt: skip
-        if reference is not None:
-            console.print(f"ideal reference: {out / IDEAL_DIR / 'metrics.json'}")
+    app.command("demo")(demo)
 
 
 #: Sub-directory of the ideal reference run when realism is on.

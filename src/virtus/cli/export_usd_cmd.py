@@ -38,13 +38,13 @@ def register(app: typer.Typer) -> None:
         from virtus.twin.usd import require_usd
 
         require_usd()  # one line without usd-core, before anything is read
-        from virtus.calib.io import load_calibration
-        from virtus.geometry.devices import default_rig
-        from virtus.io.images import read_image
+        from virtus.calib import load_rig_file
+        from virtus.geometry import default_rig
+        from virtus.io import read_image
         from virtus.pipeline.inputs import load_scene
         from virtus.twin.usd import export_usd
 
-        the_rig = load_calibration(rig) if rig is not None else default_rig()
+        the_rig = load_rig_file(rig) if rig is not None else default_rig()
         the_scene = load_scene(scene) if scene is not None else None
         image = read_image(pattern) if pattern is not None else None
         path = export_usd(

@@ -1,16 +1,21 @@
-"""Options shared by several sub-commands, and the one place that builds a Scanner from them."""
+"""Options shared by several sub-commands; the scanner options as one bundle
+(:func:`scanner_options`), and the one place that builds a Scanner from them."""
 
 from __future__ import annotations
 
+import inspect
+from collections.abc import Callable, Collection
+from dataclasses import dataclass, fields
 from enum import StrEnum
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
 import typer
 
-from virtus.sensor.projector import Lookup
+from virtus.sensor import Lookup
 
 if TYPE_CHECKING:
+    from virtus.geometry import Rig
     from virtus.scanner import Scanner
 
 LOOKUP_HELP = (
@@ -91,6 +96,115 @@ SeedOption = Annotated[
 ]
 
 
+#: The scanner options by parameter name, in the order ``--help`` lists them.
+SCANNER_OPTIONS: dict[str, Any] = {
+    "rig": RigOption,
+    "sequence": SequenceOption,
+    "spp": SppOption,
+    "lookup": LookupOption,
+    "projector": ProjectorOption,
+    "bit_depth": BitDepthOption,
+    "sensor": SensorOption,
+    "variant": VariantOption,
+    "bounces": BouncesOption,
+    "projector_lens": ProjectorLensOption,
+    "camera_lens": CameraLensOption,
+}
+#: The parameter of a command that receives the bundle (see :func:`scanner_options`).
+BUNDLE_PARAMETER = "options"
+
+
+@dataclass(frozen=True)
+class ScannerOptions:
+    """The values of the scanner options (:data:`SCANNER_OPTIONS`) a command was given; the
+    defaults are those of a command that lacks an option. :meth:`build` makes the Scanner,
+    when the command is ready for its checks (a command may never need one)."""
+
+    rig: Path | None = None
+    sequence: Path | None = None
+    spp: int = 4
+    lookup: Lookup | None = None
+    projector: str = "ideal"
+    bit_depth: int | None = None
+    sensor: str = "ideal"
+    variant: str | None = None
+    bounces: int = 1
+    projector_lens: str | None = None
+    camera_lens: str | None = None
+
+    def build(self) -> Scanner:
+        """The Scanner these options describe (:func:`build_scanner`)."""
+        return build_scanner(**{f.name: getattr(self, f.name) for f in fields(self)})
+
+
+_Command = TypeVar("_Command", bound=Callable[..., Any])
+
+
+def scanner_options(
+    *names: str, omit: Collection[str] = (), **defaults: Any
+) -> Callable[[_Command], _Command]:
+    """Give a command the scanner options: a decorator of the command function (then
+    registered with ``app.command(...)`` as usual).
+
+    The command declares a keyword parameter ``options: ScannerOptions`` where the scanner
+    options are to appear in its ``--help``; the decorator replaces it with the options'
+    parameters (``names``, default: all of :data:`SCANNER_OPTIONS`, less ``omit``; each
+    declared once, above) in the signature Typer reads (``__signature__``), and calls the
+    command with ``options`` holding their values (:class:`ScannerOptions`, whose
+    :meth:`~ScannerOptions.build` makes the Scanner). ``defaults`` overrides an option's
+    default for this command.
+    """
+    chosen = [name for name in (names or SCANNER_OPTIONS) if name not in omit]
+    unknown = sorted({*chosen, *defaults} - set(SCANNER_OPTIONS))
+    if unknown:
+        raise ValueError(f"not scanner options: {unknown}")
+    fallback = {f.name: f.default for f in fields(ScannerOptions)}
+
+    def decorate(command: _Command) -> _Command:
+        signature = inspect.signature(command, eval_str=True)
+        own = [p.replace(kind=inspect.Parameter.KEYWORD_ONLY)
+               for p in signature.parameters.values()]  # fmt: skip
+        at = [p.name for p in own].index(BUNDLE_PARAMETER)
+        bundle = [
+            inspect.Parameter(
+                name,
+                inspect.Parameter.KEYWORD_ONLY,
+                default=defaults.get(name, fallback[name]),
+                annotation=SCANNER_OPTIONS[name],
+            )
+            for name in chosen
+        ]
+        parameters = [*own[:at], *bundle, *own[at + 1 :]]
+
+        def wrapper(**kwargs: Any) -> Any:
+            values = {name: kwargs.pop(name) for name in chosen}
+            return command(**kwargs, **{BUNDLE_PARAMETER: ScannerOptions(**values)})
+
+        for attribute in ("__module__", "__name__", "__qualname__", "__doc__"):
+            setattr(wrapper, attribute, getattr(command, attribute))
+        wrapper.__signature__ = signature.replace(parameters=parameters)  # type: ignore[attr-defined]
+        wrapper.__annotations__ = {p.name: p.annotation for p in parameters}
+        return wrapper  # type: ignore[return-value]
+
+    return decorate
+
+
+def load_rig_option(path: Path | None) -> Rig:
+    """The rig of ``--rig``: a rig or calibration file, read by
+    :func:`virtus.calib.io.load_rig_file` (a rig JSON that states no units is in metres,
+    as the rig schema has it), or the paper's rig."""
+    from virtus.errors import InputError
+    from virtus.geometry import default_rig
+
+    if path is None:
+        return default_rig()
+    from virtus.calib import load_rig_file
+
+    if not path.exists():
+        raise InputError("rig", "an existing JSON file", str(path))
+    return load_rig_file(path, units="m" if path.suffix.lower() == ".json" else None)
+
+
 def load_sequence_option(path: Path | None, width: int, height: int):  # noqa: ANN201
     """The sequence of ``--sequence`` (checked against the projector size), or the paper's."""
     from virtus.errors import InputError
@@ -111,7 +225,7 @@ def load_sequence_option(path: Path | None, width: int, height: int):  # noqa: A
 def parse_lens(text: str | None, option: str):  # noqa: ANN201
     """A :class:`virtus.geometry.optics.ThinLens` from ``'APERTURE_M,FOCUS_M'``, or None."""
     from virtus.errors import InputError
-    from virtus.geometry.optics import ThinLens
+    from virtus.geometry import ThinLens
 
     if text is None:
         return None
@@ -140,11 +254,9 @@ def build_scanner(
     """The Scanner the command-line options describe (every job builds it here), with the
     one :class:`~virtus.render.settings.RenderSettings` of ``--spp``, ``--variant``,
     ``--bounces`` and the lenses."""
-    from virtus.geometry.devices import Rig, default_rig
     from virtus.render.settings import RenderSettings
     from virtus.scanner import Scanner
-    from virtus.sensor.camera import load_sensor
-    from virtus.sensor.projector import load_projector
+    from virtus.sensor import load_projector, load_sensor
 
     the_sensor = load_sensor(sensor)
     if bit_depth is not None:
@@ -152,7 +264,7 @@ def build_scanner(
     the_projector = load_projector(projector)
     if lookup is not None:
         the_projector = the_projector.with_(pixel=lookup)
-    the_rig = Rig.load_json(rig) if rig is not None else default_rig()
+    the_rig = load_rig_option(rig)
     projector = the_rig.projector.intrinsics
     the_sequence = load_sequence_option(sequence, projector.width, projector.height)
     settings = RenderSettings(

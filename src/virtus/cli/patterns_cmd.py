@@ -26,7 +26,7 @@ def register(app: typer.Typer) -> None:
         DIR/sequence.json, the description every job reads with --sequence. Default: the
         paper's 52 frames (18-step phase shift, T = 18 px, 6-bit Gray + complementary,
         vertical and horizontal, white, black); --sequence FILE writes that sequence."""
-        from virtus.geometry.optics import Intrinsics
+        from virtus.geometry import Intrinsics
         from virtus.patterns import default_sequence, load_sequence_file
 
         if sequence is not None:

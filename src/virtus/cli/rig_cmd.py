@@ -27,9 +27,10 @@ def register(app: typer.Typer) -> None:
         ] = PAPER_PIXEL_SIZE_MM,
     ) -> None:
         """Print the rig (DESIGN schema), Isaac Sim camera parameters and projected size."""
-        from virtus.geometry.devices import Rig, default_rig, rig_info
+        from virtus.cli.options import load_rig_option
+        from virtus.geometry import rig_info
 
-        the_rig = Rig.load_json(rig) if rig is not None else default_rig()
+        the_rig = load_rig_option(rig)
         data = rig_info(the_rig, pixel_size_mm)
         if json_out:
             typer.echo(json.dumps(data, indent=2))

@@ -8,160 +8,122 @@ from typing import Annotated
 import typer
 
 from virtus.cli.options import (
-    BitDepthOption,
-    BouncesOption,
-    CameraLensOption,
-    LookupOption,
     OverwriteOption,
-    ProjectorLensOption,
-    ProjectorOption,
-    RigOption,
+    ScannerOptions,
     SeedOption,
-    SensorOption,
-    SequenceOption,
-    SppOption,
     UnitsOption,
-    VariantOption,
-    build_scanner,
+    scanner_options,
 )
 from virtus.paper import C2M_MAE_MM
 
 
+@scanner_options()
+def scan(
+    *,
+    out: Annotated[Path, typer.Option(help="Scan directory to write.")] = Path("scan"),
+    scene: Annotated[
+        str,
+        typer.Option(
+            help="Scene YAML, or a built-in scene: 'sphere' (100 mm sphere, the paper's) "
+            "or 'freeform' (the procedural free-form object)."
+        ),
+    ] = "sphere",
+    calibration: Annotated[
+        Path | None,
+        typer.Option(help="Calibration file to reconstruct with; default: the true rig."),
+    ] = None,
+    units: UnitsOption = None,
+    options: ScannerOptions,
+    seed: SeedOption = 0,
+    turntable: Annotated[
+        int,
+        typer.Option(
+            help="Scan N turntable views of the scene's mesh object (vertical axis through "
+            "its origin), merge them in the object frame and report C2M; 0 = one view."
+        ),
+    ] = 0,
+    refine: Annotated[
+        bool, typer.Option("--refine", help="Turntable: refine each view's pose by ICP.")
+    ] = False,
+    overwrite: OverwriteOption = False,
+    resume: Annotated[
+        bool,
+        typer.Option(
+            "--resume",
+            help="Continue an interrupted run in OUT (same settings): finished turntable "
+            "views and a complete capture are kept.",
+        ),
+    ] = False,
+) -> None:
+    """Render the scene with the true rig (52 frames), save the capture in OUT (layout of
+    virtus capture), decode it and write OUT/points.ply (metres, camera frame). OUT is
+    owned by the run (OUT/run.json): another run's directory is refused unless
+    --overwrite."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from virtus.calib import load_rig_file
+    from virtus.pipeline.inputs import resolve_scene
+    from virtus.pipeline.scan import ScanSettings
+    from virtus.pipeline.scan import scan as run_scan
+    from virtus.pipeline.turntable import check_views
+    from virtus.scene.builtin import BUILTIN_SCENES
+    from virtus.sensor import as_seed
+
+    # Every check before anything is claimed, rendered or written.
+    settings = ScanSettings(seed=as_seed(seed))
+    if turntable:
+        check_views(turntable)
+    scanner = options.build()
+    used = (
+        None
+        if calibration is None
+        else load_rig_file(calibration, scanner.rig, units=units and units.value)
+    )
+    builtin = scene in BUILTIN_SCENES and not Path(scene).is_file()
+    the_scene = scene if builtin else resolve_scene(scene, out)  # a YAML file: read only
+    console = Console()
+    if turntable:
+        _turntable(console, the_scene, out, turntable, scanner, used, settings,
+                   refine, overwrite, resume)  # fmt: skip
+        return
+    result = run_scan(
+        the_scene,
+        out,
+        scanner=scanner,
+        calibration=used,
+        settings=settings,
+        overwrite=overwrite,
+        resume=resume,
+    )
+    recon = result.reconstruction
+    table = Table(title=f"virtus scan -> {out}", show_header=False)
+    table.add_row("scene", scene)
+    table.add_row("reconstructed with", str(calibration) if calibration else "the true rig")
+    table.add_row("decoded pixels", f"{result.decoded.mask.mean():.1%}")
+    table.add_row("points", f"{int(recon.mask.sum())} -> {result.ply_path}")
+    table.add_row(
+        "time",
+        ", ".join(f"{k.removesuffix('_s')} {v:.2f} s" for k, v in result.timing_s.items()),
+    )
+    console.print(table)
+    console.print(f"next: virtus evaluate {out}  (C2M against the scene's meshes)")
+
+
 def register(app: typer.Typer) -> None:
-    @app.command("scan")
-    def scan(
-        out: Annotated[Path, typer.Option(help="Scan directory to write.")] = Path("scan"),
-        scene: Annotated[
-            str,
-            typer.Option(
-                help="Scene YAML, or a built-in scene: 'sphere' (100 mm sphere, the paper's) "
-                "or 'freeform' (the procedural free-form object)."
-            ),
-        ] = "sphere",
-        calibration: Annotated[
-            Path | None,
-            typer.Option(help="Calibration file to reconstruct with; default: the true rig."),
-        ] = None,
-        units: UnitsOption = None,
-        rig: RigOption = None,
-        sequence: SequenceOption = None,
-        spp: SppOption = 4,
-        lookup: LookupOption = None,
-        projector: ProjectorOption = "ideal",
-        bit_depth: BitDepthOption = None,
-        sensor: SensorOption = "ideal",
-        seed: SeedOption = 0,
-        variant: VariantOption = None,
-        bounces: BouncesOption = 1,
-        projector_lens: ProjectorLensOption = None,
-        camera_lens: CameraLensOption = None,
-        turntable: Annotated[
-            int,
-            typer.Option(
-                help="Scan N turntable views of the scene's mesh object (vertical axis through "
-                "its origin), merge them in the object frame and report C2M; 0 = one view."
-            ),
-        ] = 0,
-        refine: Annotated[
-            bool, typer.Option("--refine", help="Turntable: refine each view's pose by ICP.")
-        ] = False,
-        overwrite: OverwriteOption = False,
-        resume: Annotated[
-            bool,
-            typer.Option(
-                "--resume",
-                help="Continue an interrupted run in OUT (same settings): finished turntable "
-                "views and a complete capture are kept.",
-            ),
-        ] = False,
-    ) -> None:
-        """Render the scene with the true rig (52 frames), save the capture in OUT (layout of
-        virtus capture), decode it and write OUT/points.ply (metres, camera frame). OUT is
-        owned by the run (OUT/run.json): another run's directory is refused unless
-        --overwrite."""
-        from rich.console import Console
-        from rich.table import Table
-
-        from virtus.calib import load_rig_file
-        from virtus.pipeline.inputs import resolve_scene
-        from virtus.pipeline.scan import ScanSettings
-        from virtus.pipeline.scan import scan as run_scan
-        from virtus.pipeline.turntable import check_views
-        from virtus.scene.builtin import BUILTIN_SCENES
-        from virtus.sensor.camera import as_seed
-
-        # Every check before anything is claimed, rendered or written.
-        settings = ScanSettings(seed=as_seed(seed))
-        if turntable:
-            check_views(turntable)
-        scanner = build_scanner(
-            rig=rig, sequence=sequence, lookup=lookup, projector=projector, spp=spp,
-            bit_depth=bit_depth,
-            sensor=sensor, variant=variant, bounces=bounces,
-            projector_lens=projector_lens, camera_lens=camera_lens,
-        )  # fmt: skip
-        used = (
-            None
-            if calibration is None
-            else load_rig_file(calibration, scanner.rig, units=units and units.value)
-        )
-        builtin = scene in BUILTIN_SCENES and not Path(scene).is_file()
-        the_scene = scene if builtin else resolve_scene(scene, out)  # a YAML file: read only
-        console = Console()
-        if turntable:
-            _turntable(console, the_scene, out, turntable, scanner, used, settings,
-                       refine, overwrite, resume)  # fmt: skip
-            return
-        result = run_scan(
-            the_scene,
-            out,
-            scanner=scanner,
-            calibration=used,
-            settings=settings,
-            overwrite=overwrite,
-            resume=resume,
-        )
-        recon = result.reconstruction
-        table = Table(title=f"virtus scan -> {out}", show_header=False)
-        table.add_row("scene", scene)
-        table.add_row("reconstructed with", str(calibration) if calibration else "the true rig")
-        table.add_row("decoded pixels", f"{result.decoded.mask.mean():.1%}")
-        table.add_row("points", f"{int(recon.mask.sum())} -> {result.ply_path}")
-        table.add_row(
-            "time",
-            ", ".join(f"{k.removesuffix('_s')} {v:.2f} s" for k, v in result.timing_s.items()),
-        )
-        console.print(table)
-        console.print(f"next: virtus evaluate {out}  (C2M against the scene's meshes)")
+    app.command("scan")(scan)
 
 
 def _turntable(console, scene, out, n_views, scanner, calibration, settings, refine, overwrite,  # noqa: ANN001
                resume):  # fmt: skip
-    import numpy as np
     from rich.table import Table
 
-    from virtus.errors import InputError
-    from virtus.geometry.transforms import Pose
-    from virtus.pipeline.turntable import turntable_scan
-    from virtus.scene.builtin import FREEFORM_CENTRE_M
-    from virtus.scene.model import MeshObject
+    from virtus.pipeline.turntable import turntable_scan_scene
 
-    if scene == "freeform":  # the built-in object, written into OUT by the run
-        mesh_path, scale, start = None, 1.0, Pose(np.eye(3), FREEFORM_CENTRE_M)
-    else:
-        objects = [] if isinstance(scene, str) else list(scene.objects)
-        meshes = [o for o in objects if isinstance(o, MeshObject)]
-        if len(meshes) != 1:
-            raise InputError(
-                "scene", "exactly one mesh object for a turntable scan", f"{len(meshes)}"
-            )
-        mesh_path, scale, start = meshes[0].path, meshes[0].scale_to_m, meshes[0].pose
-    result = turntable_scan(
-        mesh_path,
+    result = turntable_scan_scene(
+        scene,
         out,
         n_views=n_views,
-        scale_to_m=scale,
-        start=start,
         scanner=scanner,
         calibration=calibration,
         settings=settings,

@@ -51,6 +51,16 @@ from virtus.scene.presets import AMBIENTS, MATERIALS, sphere_scene
 from virtus.sensor.camera import SENSOR_PRESETS
 from virtus.sensor.projector import PROJECTOR_PRESETS
 
+__all__ = [
+    "COLUMNS",
+    "REALISM",
+    "AblationCell",
+    "ablation_cells",
+    "plot_ablation",
+    "run_ablation",
+    "run_cell",
+]
+
 #: Realism settings: each changes the scanner from the ideal one.
 REALISM: dict[str, Callable[[Scanner], Scanner]] = {
     "ideal": lambda s: s,
@@ -204,7 +214,7 @@ def run_ablation(
         is written).
     VirtusError : ``out_dir`` in use or holding another run's files.
     """
-    from virtus.sensor.camera import as_seed
+    from virtus.sensor.noise import as_seed
 
     scanner = scanner or Scanner()
     cells = ablation_cells(materials, ambients, realism)

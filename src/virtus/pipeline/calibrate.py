@@ -89,7 +89,16 @@ from virtus.io.runs import (
 )
 from virtus.io.safeio import load_npz, read_json
 from virtus.scanner import Scanner
-from virtus.sensor.camera import MAX_SEED, as_seed
+from virtus.sensor.noise import MAX_SEED, as_seed
+
+__all__ = [
+    "MAX_RANDOM_POSES",
+    "calibrate_captures",
+    "calibrate_rig",
+    "capture_dirs",
+    "check_pose_spec",
+    "recalibrate",
+]
 
 #: Most poses of ``random:N`` (each pose is a full capture: 200 are ~10,000 frames).
 MAX_RANDOM_POSES = 200

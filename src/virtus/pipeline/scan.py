@@ -4,8 +4,9 @@
   coordinates and writes ``decoded/`` (see :mod:`virtus.capture.scandir`).
 * :func:`reconstruct_capture` triangulates them with the capture's rig or a calibration
   file and writes the point map and ``points.ply``.
-* :func:`scan` renders a scene with the true rig (the virtual sensor), saves the capture,
-  then decodes and reconstructs it -- with calibrated parameters when a calibration is given.
+* :func:`scan` renders a scene with the true rig (the virtual sensor), saves the capture
+  (as the capture job does, :mod:`virtus.pipeline.capture`), then decodes and reconstructs
+  it -- with calibrated parameters when a calibration is given.
 
 Points are in the camera frame, metres. Reconstruction
 (:func:`virtus.reconstruct.reconstruct`) drops pixels next to depth discontinuities (mixed
@@ -42,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from virtus.calib.io import load_rig_file
-from virtus.capture.capture import MANIFEST, Capture
+from virtus.capture.capture import Capture
 from virtus.capture.scandir import (
     DERIVED_FILES,
     SCAN_LAYOUT,
@@ -55,6 +56,7 @@ from virtus.geometry.devices import Rig
 from virtus.geometry.transforms import Pose
 from virtus.io.runs import RunDirectory, claim_run, directory_lock
 from virtus.patterns import DecodeResult
+from virtus.pipeline.capture import builtin_scene_in_run, complete_capture, save_capture
 from virtus.reconstruct import (
     DEFAULT_MIN_MODULATION,
     EDGE_MAX_STEP,
@@ -68,7 +70,6 @@ from virtus.scanner import Scanner
 __all__ = [
     "ScanResult",
     "ScanSettings",
-    "capture_job",
     "decode_capture",
     "reconstruct_capture",
     "scan",
@@ -98,7 +99,7 @@ class ScanSettings:
 
     def __post_init__(self) -> None:
         from virtus.checks import positive
-        from virtus.sensor.camera import as_seed
+        from virtus.sensor.noise import as_seed
 
         if self.use not in ("uv", "u", "v"):
             raise InputError("use", "'uv', 'u' or 'v'", self.use)
@@ -357,15 +358,6 @@ def scan(
         return scan_into(run, "", scene, scanner, used, settings, cam2world=cam2world)
 
 
-def builtin_scene_in_run(run: RunDirectory, name: str) -> Any:
-    """A built-in scene whose asset files (``freeform.stl``) the run owns."""
-    from virtus.scene.builtin import builtin_scene
-
-    if name == "freeform":
-        run.own("freeform.stl")
-    return builtin_scene(name, run.path)
-
-
 def calibration_rig(calibration: str | Path | Rig | None, scanner: Scanner) -> Rig:
     """The rig to triangulate with: ``scanner``'s (None), a rig, or a calibration file read
     with :func:`virtus.calib.io.load_rig_file`; its baseline checked
@@ -377,61 +369,6 @@ def calibration_rig(calibration: str | Path | Rig | None, scanner: Scanner) -> R
     else:
         used = load_rig_file(calibration, scanner.rig)
     return check_baseline(used, "calibration" if calibration is not None else "rig")
-
-
-def _complete_capture(directory: Path) -> Capture | None:
-    """The capture in ``directory`` if it is complete and readable, else None."""
-    if not (directory / MANIFEST).is_file():
-        return None
-    try:
-        capture = Capture.load(directory)
-        capture.frames  # noqa: B018 - read (and check) the frames now
-    except (InputError, VirtusError, OSError):
-        return None
-    return capture
-
-
-def save_capture(run: RunDirectory, sub: str, capture: Capture) -> Path:
-    """Save ``capture`` into ``run``'s directory (or its sub-directory ``sub``), replacing
-    an earlier capture there and the files derived from it; every file is registered with
-    the run first (scene assets, named while saving, right after). Returns the manifest."""
-    prefix = f"{sub}/" if sub else ""
-    directory = run.file(sub) if sub else run.path
-    run.own(*(prefix + name for name in (*capture.file_names(), *DERIVED_FILES)))
-    for name in DERIVED_FILES:  # results of an earlier or interrupted attempt
-        (directory / name).unlink(missing_ok=True)
-    manifest = capture.save(directory, overwrite=True)
-    assets = sorted((directory / "scene_assets").glob("*"))
-    run.own(*(prefix + p.relative_to(directory).as_posix() for p in assets))
-    run.log(f"saved capture {sub or '.'}")
-    return manifest
-
-
-def capture_job(
-    out_dir: str | Path,
-    command: str,
-    config: dict[str, Any],
-    make: Any,
-    *,
-    inputs: dict[str, str | Path] | None = None,
-    overwrite: bool = False,
-    resume: bool = False,
-) -> Capture:
-    """Run a job that writes one capture into ``out_dir`` (``virtus capture``, ``virtus
-    import``): claim the directory (:func:`virtus.io.runs.claim_run` with ``command``,
-    ``config``, ``inputs`` and :data:`~virtus.capture.scandir.SCAN_LAYOUT`), call
-    ``make()`` for the capture and save it (:func:`save_capture`). A resumed run keeps a
-    complete capture and returns it. Check every input before calling: nothing may fail
-    between the claim and ``make``."""
-    with claim_run(
-        out_dir, command, config, inputs=inputs, layout=SCAN_LAYOUT, overwrite=overwrite,
-        resume=resume,
-    ) as run:  # fmt: skip
-        capture = _complete_capture(run.path) if run.resumed else None
-        if capture is None:
-            capture = make()
-            save_capture(run, "", capture)
-        return capture
 
 
 def scan_into(
@@ -453,7 +390,7 @@ def scan_into(
     directory = run.file(sub) if sub else run.path
     timing: dict[str, float] = {}
     start = time.perf_counter()
-    capture = _complete_capture(directory) if run.resumed else None
+    capture = complete_capture(directory) if run.resumed else None
     if capture is None:
         capture = scanner.capture(scene, cam2world=cam2world, rng=settings.seed)
         save_capture(run, sub, capture)

@@ -53,7 +53,14 @@ from virtus.metrology import C2MResult, MeshIndex, cloud_to_mesh, icp_to_mesh
 from virtus.pipeline.scan import ScanSettings, calibration_rig, scan_into
 from virtus.scanner import Scanner
 
-__all__ = ["TurntableResult", "turntable_scan"]
+__all__ = [
+    "MAX_VIEWS",
+    "TurntableResult",
+    "check_views",
+    "turntable_object",
+    "turntable_scan",
+    "turntable_scan_scene",
+]
 
 #: Points farther than this (m) from the object's bounding box (in the object frame) are not
 #: the object (background, table) and are not merged.
@@ -197,6 +204,59 @@ def turntable_scan(
         mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
         return _run_views(run, config, mesh, Path(mesh_path), scale, poses, scanner, used,
                           settings, refine)  # fmt: skip
+
+
+def turntable_object(scene: Any) -> tuple[Path | None, float, Pose]:
+    """The object a turntable scan of ``scene`` turns: ``(mesh_path, scale_to_m, start)``
+    for :func:`turntable_scan`.
+
+    ``scene`` is the name of a built-in scene or a :class:`~virtus.scene.model.Scene`. The
+    built-in ``"freeform"`` is the free-form object (``mesh_path`` None, written into the
+    run's directory) at :data:`virtus.scene.builtin.FREEFORM_CENTRE_M`; a scene must hold
+    exactly one mesh object (its file, scale and pose), else :class:`InputError`.
+    """
+    from virtus.scene.builtin import FREEFORM_CENTRE_M
+    from virtus.scene.model import MeshObject
+
+    if scene == "freeform":  # the built-in object, written into OUT by the run
+        return None, 1.0, Pose(np.eye(3), FREEFORM_CENTRE_M)
+    objects = [] if isinstance(scene, str) else list(scene.objects)
+    meshes = [o for o in objects if isinstance(o, MeshObject)]
+    if len(meshes) != 1:
+        raise InputError("scene", "exactly one mesh object for a turntable scan", f"{len(meshes)}")
+    return meshes[0].path, meshes[0].scale_to_m, meshes[0].pose
+
+
+def turntable_scan_scene(
+    scene: Any,
+    out_dir: str | Path,
+    *,
+    n_views: int = 8,
+    scanner: Scanner | None = None,
+    calibration: str | Path | Rig | None = None,
+    settings: ScanSettings | None = None,
+    refine: bool = False,
+    overwrite: bool = False,
+    resume: bool = False,
+) -> TurntableResult:
+    """:func:`turntable_scan` of the object of ``scene`` (:func:`turntable_object`: a
+    built-in scene's name or a scene with one mesh object), turned about the vertical axis
+    through its origin, view 0 at its pose in the scene; the other arguments are
+    :func:`turntable_scan`'s."""
+    mesh_path, scale, start = turntable_object(scene)
+    return turntable_scan(
+        mesh_path,
+        out_dir,
+        n_views=n_views,
+        scale_to_m=scale,
+        start=start,
+        scanner=scanner,
+        calibration=calibration,
+        settings=settings,
+        refine=refine,
+        overwrite=overwrite,
+        resume=resume,
+    )
 
 
 def _run_views(

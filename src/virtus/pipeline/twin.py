@@ -48,6 +48,18 @@ from virtus.scanner import Scanner
 from virtus.sensor.camera import Sensor
 from virtus.twin.parameters import DEFAULT_PIXEL_SIZE_M, twin_parameters
 
+__all__ = [
+    "ISAAC_FILE",
+    "PAPER_CLOUD_MAE_MM",
+    "RIG_FILE",
+    "USD_FILE",
+    "VALIDATION_FILE",
+    "TwinValidation",
+    "compare_captures",
+    "validate_twin",
+    "write_twin",
+]
+
 #: Border of the board plane (fraction of its size per side) left out of the comparisons:
 #: pixels straddling the board's edge mix board and background and belong to neither.
 BOARD_EDGE_FRACTION = 0.05

@@ -8,7 +8,7 @@ import pytest
 import trimesh
 
 from tests import tolerances as tol
-from tests.test_render_support import LAMBERT, plane_depth, small_rig, tilted_plane
+from tests.support import LAMBERT, plane_depth, small_rig, tilted_plane
 from virtus.errors import InputError
 from virtus.geometry.devices import Camera, Projector, Rig, default_rig
 from virtus.geometry.optics import Intrinsics

@@ -259,7 +259,7 @@ def test_presets_and_files(tmp_path) -> None:
 
 def test_the_device_synthesis_agrees_with_the_host_one() -> None:
     # The Dr.Jit path (the GPU's, run here on the LLVM backend) with a full projector model.
-    from tests.test_render_support import small_rig
+    from tests.support import small_rig
     from virtus.patterns import default_sequence
     from virtus.render import render
     from virtus.scene.model import default_scene

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tests import tolerances as tol
-from tests.test_real_calibration import scaled_rig
+from tests.pipeline.test_calibrate_captures import scaled_rig
 from virtus.calib.board import board_from_spec
 from virtus.calib.poses import pose_set
 from virtus.calib.scene import BOARD_BLUR_M, BOARD_TEXEL_M, board_scene

@@ -11,8 +11,8 @@ import pytest
 from scipy.optimize import least_squares
 
 from tests import tolerances as tol
-from tests.test_render import interior
-from tests.test_render_support import LAMBERT, cropped_rig, small_rig, sphere_and_plane
+from tests.render.test_renderer import interior
+from tests.support import LAMBERT, cropped_rig, small_rig, sphere_and_plane
 from virtus.capture.groundtruth import ARRAY_NAMES, GroundTruth
 from virtus.errors import InputError
 from virtus.geometry.optics import ThinLens

@@ -42,7 +42,7 @@ POLL_S = 0.002
 
 def quarter_rig() -> Rig:
     """The paper's rig at a quarter of its resolution (240 x 240 camera, 228 x 285 projector):
-    both devices are resampled (unlike ``tests.test_render_support.small_rig``), so their
+    both devices are resampled (unlike ``tests.support.small_rig``), so their
     pixels keep the paper's footprint ratio on the board."""
     rig = default_rig()
     return Rig(

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from tests import tolerances as tol
-from tests.test_patterns import sample_coordinates
+from tests.patterns.test_sequence import sample_coordinates
 from virtus.errors import InputError
 from virtus.patterns import (
     DecodeWarning,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 import virtus.pipeline.calibrate as job
-from tests.test_calibrate_resume import quarter_rig
+from tests.pipeline.test_calibrate_resume import quarter_rig
 from virtus.cli import main
 from virtus.render import RenderSettings
 from virtus.scanner import Scanner

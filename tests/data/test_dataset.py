@@ -43,7 +43,7 @@ RETRIANGULATION_M = 1e-6
 DECODE_AGREEMENT_RAD = 0.3
 DECODE_MEDIAN_RAD = 0.15
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "datasets"
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples" / "datasets"
 
 
 def tiny_rig() -> Rig:

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.test_render_support import small_rig
+from tests.support import small_rig
 from virtus.geometry.devices import Camera, Projector, Rig, default_rig
 from virtus.geometry.optics import Intrinsics, ThinLens
 from virtus.geometry.transforms import Pose

@@ -206,7 +206,7 @@ def test_scan_with_a_missing_calibration_fails_before_rendering(tmp_path: Path) 
 
 #: A cheap scanner for the ownership tests: a 160 x 160 camera, 1 spp.
 def _small_scanner() -> Scanner:
-    from tests.test_render_support import small_rig
+    from tests.support import small_rig
 
     return Scanner(
         rig=small_rig(),

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from tests import tolerances as tol
-from tests.test_render import interior
-from tests.test_render_support import cropped_rig, small_rig
+from tests.render.test_renderer import interior
+from tests.support import cropped_rig, small_rig
 from virtus.calib.io import save_paper_txt
 from virtus.capture.capture import Capture, import_capture
 from virtus.cli import main
@@ -24,7 +24,7 @@ from virtus.scene.model import default_scene
 from virtus.sensor.camera import Sensor
 from virtus.sensor.projector import Lookup, ProjectorModel
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "sequences"
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples" / "sequences"
 
 
 def run_cli(args: list[str], capsys) -> tuple[int, str, str]:

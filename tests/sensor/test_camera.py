@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from tests import tolerances as tol
-from tests.test_render_support import small_rig
+from tests.support import small_rig
 from virtus.errors import InputError
 from virtus.patterns import default_sequence
 from virtus.patterns.phase import wrapped_phase

@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from tests.test_render_support import small_rig
+from tests.support import small_rig
 from virtus.cli import main
 from virtus.errors import InputError
 from virtus.pipeline.ablation import COLUMNS, run_ablation

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.test_dataset import tiny_config
+from tests.data.test_dataset import tiny_config
 from virtus.capture.capture import Capture
 from virtus.data import DatasetStore, generate, load_config
 from virtus.data.labels import array_layout, sample_arrays

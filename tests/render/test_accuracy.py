@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from tests import tolerances as tol
-from tests.test_render_support import (
+from tests.support import (
     LAMBERT,
     cropped_rig,
     fit_sphere_lsq,

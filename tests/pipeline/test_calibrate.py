@@ -129,7 +129,7 @@ def test_cli_calibrates_and_writes_the_files(tmp_path, capsys):
 def test_any_sequence_with_both_directions_calibrates(tmp_path):
     """A heterodyne sequence of 4 steps without white or black frames: circles are found and
     refined in the phase background, projector coordinates come from the capture's decode."""
-    from tests.test_calibrate_resume import quarter_rig
+    from tests.pipeline.test_calibrate_resume import quarter_rig
     from virtus.patterns import heterodyne_sequence
 
     rig = quarter_rig()

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from tests.test_render_support import small_rig
+from tests.support import small_rig
 from virtus.capture.capture import CAPTURE_FORMAT, Capture
 from virtus.cli import main
 from virtus.errors import VirtusError
@@ -19,7 +19,7 @@ from virtus.scanner import Scanner
 from virtus.scene.model import Scene, SphereObject, TexturedPlaneObject
 from virtus.sensor.camera import SENSOR_PRESETS
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
