@@ -8,6 +8,7 @@ printed as one line on stderr, with exit status 2 and no traceback.
 
 from __future__ import annotations
 
+import errno
 import sys
 import warnings
 
@@ -70,6 +71,17 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
     print(f"virtus: warning: {message}", file=sys.stderr)
 
 
+def _os_error_line(error: OSError) -> str:
+    """An ``OSError`` as one line naming its path; a full disk says so in plain words
+    ("no space left on device writing PATH; free some space or write elsewhere")."""
+    where = error.filename
+    if error.errno == errno.ENOSPC:
+        target = f" writing {where}" if where else ""
+        return f"no space left on device{target}; free some space or write elsewhere"
+    text = error.strerror or str(error) or type(error).__name__
+    return f"{text}: {where}" if where else text
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the console script; ``argv`` defaults to ``sys.argv[1:]``.
 
@@ -96,8 +108,7 @@ def main(argv: list[str] | None = None) -> None:
         print(f"virtus: error: {error}", file=sys.stderr)
         sys.exit(2)
     except OSError as error:
-        where = f": {error.filename}" if error.filename else ""
-        print(f"virtus: error: {error.strerror or error}{where}", file=sys.stderr)
+        print(f"virtus: error: {_os_error_line(error)}", file=sys.stderr)
         sys.exit(2)
     # Without standalone mode Typer returns the status of --help or typer.Exit, or what the
     # command returned (None); exit as standalone mode would.

@@ -2,6 +2,9 @@
 
 * :mod:`~virtus.io.safeio` -- guarded readers of every user file (JSON, YAML, .npy/.npz, sizes
   bounded first).
+* :mod:`~virtus.io.npyfile` -- ``.npy``/``.npz`` headers parsed and bounded by virtus itself.
+* :mod:`~virtus.io.safewrite` -- what a write may replace (regular files only, links never
+  followed).
 * :mod:`~virtus.io.jsonio` -- JSON written one way (numpy values, paths; atomic replace).
 * :mod:`~virtus.io.images` -- camera image files (8-16-bit PNG/TIFF/BMP), natural sort.
 * :mod:`~virtus.io.ply` -- binary PLY point clouds.
@@ -10,6 +13,7 @@
 
 from virtus.io.images import (
     frame_name,
+    image_size,
     list_images,
     natural_key,
     pool_size,
@@ -50,12 +54,14 @@ from virtus.io.safeio import (
     check_keys,
     closest_key,
     load_npy,
+    load_npz,
     parse_json,
     parse_yaml,
     read_json,
     read_text,
     read_yaml,
 )
+from virtus.io.safewrite import check_replaceable
 
 __all__ = [
     "MAX_ARRAY_BYTES",
@@ -71,6 +77,7 @@ __all__ = [
     "canonical",
     "check_file",
     "check_keys",
+    "check_replaceable",
     "claim_run",
     "closest_key",
     "config_digest",
@@ -78,10 +85,12 @@ __all__ = [
     "file_digest",
     "first_difference",
     "frame_name",
+    "image_size",
     "json_default",
     "json_text",
     "list_images",
     "load_npy",
+    "load_npz",
     "natural_key",
     "parse_json",
     "parse_yaml",

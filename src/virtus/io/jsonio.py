@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from virtus.io.safewrite import check_replaceable
+
 
 def json_default(value: Any) -> Any:
     """``json.dumps`` hook: numpy scalars -> Python numbers, arrays -> lists, paths -> str."""
@@ -40,15 +42,19 @@ def write_json(path: str | Path, data: Any, *, indent: int = 2) -> Path:
     The text goes to a uniquely named hidden temporary file beside ``path`` first and then
     replaces ``path`` (``os.replace``), so a reader sees the old file or the whole new one.
     On an ``OSError`` (disk full, permission denied, a missing folder) the temporary file is
-    removed, ``path`` is unchanged, and the error names ``path``. Returns ``path``.
+    removed, ``path`` is unchanged, and the error names ``path``. A ``path`` that exists and
+    is not a regular file (a device, FIFO, directory, symbolic link) is refused with
+    :class:`~virtus.errors.InputError` before anything is written
+    (:func:`virtus.io.safewrite.check_replaceable`). Returns ``path``.
     """
-    path = Path(path)
+    path = check_replaceable(path)
     text = json.dumps(data, indent=indent, default=json_default) + "\n"
     tmp: str | None = None
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
         with os.fdopen(fd, "w", encoding="utf-8") as handle:
             handle.write(text)
+        check_replaceable(path)  # again: it may have appeared while writing
         os.replace(tmp, path)
         tmp = None
     except OSError as error:

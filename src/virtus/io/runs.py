@@ -30,9 +30,11 @@ What a claim guarantees:
   difference is named. Without a ``run.json``, a resumed run simply starts.
 * **Atomic files.** :func:`atomic_write` writes through a temporary file in ``.virtus-tmp/``
   beside the target and ``os.replace``: a reader (or a resumed run) sees the old file or
-  the whole new one, never a partial file. An ``OSError`` (disk full, permission denied)
-  removes the temporary file and always carries the target's path, so the command line
-  prints it as one line.
+  the whole new one, never a partial file. Only a missing path or a regular file is
+  replaced: a device, FIFO, socket, directory or symbolic link in the target's place is
+  refused (:mod:`virtus.io.safewrite`), a link never followed. An ``OSError`` (disk full,
+  permission denied) removes the temporary file and always carries the target's path, so
+  the command line prints it as one line.
   Files are not fsync'ed: writes survive a killed process, not a power cut.
 """
 
@@ -53,6 +55,7 @@ from typing import Any
 from virtus import __version__
 from virtus.errors import InputError, RunConflict
 from virtus.io.jsonio import json_default
+from virtus.io.safewrite import check_not_link, check_replaceable, name_os_error
 
 #: The run record in an output directory.
 RUN_FILE = "run.json"
@@ -73,12 +76,18 @@ _IDENTITY = ("command", "virtus_version", "config", "inputs")
 # -- atomic files ---------------------------------------------------------------------------
 
 
-def _with_filename(error: OSError, path: Path) -> OSError:
-    """``error`` with ``path`` attached when it names no file (e.g. a write to an open file)."""
+def _named(error: OSError, staging: Path, directory: Path, fallback: Path) -> OSError:
+    """``error`` naming the user's path: a staged file's target in ``directory`` (the
+    staging copy is removed, naming it would mislead), ``fallback`` when it names none."""
     if error.filename is not None:
-        return error
-    code = error.errno if error.errno is not None else errno.EIO
-    return type(error)(code, error.strerror or os.strerror(code), str(path))
+        where = Path(os.fsdecode(error.filename))
+        if where.parent != staging:
+            return error
+        code = error.errno if error.errno is not None else errno.EIO
+        named = type(error)(code, error.strerror or os.strerror(code), str(directory / where.name))
+        named.__cause__ = error
+        return named
+    return name_os_error(error, fallback)
 
 
 def atomic_write_files(
@@ -86,6 +95,12 @@ def atomic_write_files(
 ) -> list[Path]:
     """Write files atomically, one by one: ``write(staging)`` fills a staging directory with
     ``names``, then each replaces its target in ``directory``.
+
+    Nothing but a missing path or a regular file is replaced: before anything is written
+    (and again just before each rename) every target is looked at with ``os.lstat``
+    (:func:`virtus.io.safewrite.check_replaceable`), and a device, FIFO, socket, directory
+    or symbolic link is refused, naming it -- a link is never followed, so what it points to
+    is never touched. The staging directory may not be a symbolic link either.
 
     Parameters
     ----------
@@ -101,19 +116,26 @@ def atomic_write_files(
 
     Raises
     ------
-    OSError : from the writes or the renames, with a path as ``filename`` when the original
-        error named none; the staging files are removed and targets not yet replaced are
-        unchanged (each file is replaced atomically, the set is not).
+    InputError : a target that is not a regular file, or a staging path that is a symbolic
+        link (nothing is written).
+    OSError : from the writes or the renames, naming the target (a staged file's error
+        names the file it was to replace; one that names no file gets the target, or
+        ``directory`` for several); the staging files are removed and targets not yet
+        replaced are unchanged (each file is replaced atomically, the set is not).
     """
     directory = Path(directory)
     staging = directory / TMP_DIR
     targets = [directory / name for name in names]
+    for target in targets:
+        check_replaceable(target)
+    check_not_link(staging, "staging directory")
     try:
-        _write_staged(staging, write)
+        _write_staged(staging, names, write)
         for name, target in zip(names, targets, strict=True):
+            check_replaceable(target)  # again: it may have appeared while writing
             os.replace(staging / name, target)
     except OSError as error:
-        named = _with_filename(error, targets[0] if len(targets) == 1 else directory)
+        named = _named(error, staging, directory, targets[0] if len(targets) == 1 else directory)
         if named is error:
             raise
         raise named from error
@@ -126,12 +148,14 @@ def atomic_write_files(
     return targets
 
 
-def _write_staged(staging: Path, write: Callable[[Path], object]) -> None:
+def _write_staged(staging: Path, names: Sequence[str], write: Callable[[Path], object]) -> None:
     """``write(staging)`` into a staging directory that other writers share: one that
     finishes removes it when it is empty, which can happen between this writer's ``mkdir``
     and its first file (seen with 12 dataset workers), or inside ``mkdir`` itself, between
     finding the directory there and checking that it is one (seen with 16); then it is made
-    again and the write retried (nothing of this writer's was in it yet)."""
+    again and the write retried (nothing of this writer's was in it yet). Files a killed
+    writer left under ``names`` are removed first (writers open their file by name, so a
+    link left there would be followed)."""
     for attempt in range(_STAGING_ATTEMPTS):
         last = attempt + 1 == _STAGING_ATTEMPTS
         try:
@@ -140,6 +164,10 @@ def _write_staged(staging: Path, write: Callable[[Path], object]) -> None:
             if staging.exists() or last:
                 raise
             continue
+        check_not_link(staging, "staging directory")
+        for name in names:
+            with contextlib.suppress(FileNotFoundError):
+                (staging / name).unlink()
         try:
             write(staging)
             return
@@ -153,7 +181,10 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[Path], object]) 
 
     The temporary file is ``<parent>/.virtus-tmp/<name>`` (see :func:`atomic_write_files`):
     a reader sees the old file or the whole new one; on an ``OSError`` (raised with
-    ``path`` attached) the temporary file is removed and ``path`` is unchanged.
+    ``path`` attached) the temporary file is removed and ``path`` is unchanged. A ``path``
+    that exists and is not a regular file (a device such as ``/dev/full``, a FIFO, a
+    directory, a symbolic link) is refused with :class:`InputError` before anything is
+    written.
     """
     path = Path(path)
     return atomic_write_files(path.parent, [path.name], lambda staging: write(staging / path.name))[

@@ -15,8 +15,11 @@ traceback, a hang or a silently half-read value. What is checked:
   expanded (an "alias bomb" fails in milliseconds) and on depth; recursive anchors,
   duplicate keys and non-finite floats refused; errors with line and column
   (:func:`parse_yaml`, :func:`read_yaml`);
-* ``.npy``: never unpickled; the header is read first, so a truncated or corrupt file is
-  refused before its data is allocated; optional dtype and shape checks (:func:`load_npy`);
+* ``.npy``/``.npz``: never unpickled; the header is parsed by virtus' own strict parser and
+  the data size it announces bounded and compared with the file before anything is
+  allocated (:mod:`virtus.io.npyfile`); an ``.npz``'s declared sizes are bounded before
+  anything is decompressed; optional dtype and shape checks (:func:`load_npy`,
+  :func:`load_npz`);
 * mappings: unknown keys refused with a "did you mean" suggestion (:func:`check_keys`).
 
 Every ``what`` argument is a short noun naming the file's role (``"rig"``, ``"scene"``);
@@ -39,7 +42,8 @@ import numpy as np
 import yaml
 
 from virtus.checks import check_shape
-from virtus.errors import InputError, VirtusError
+from virtus.errors import InputError
+from virtus.io.npyfile import read_npy_data, read_npy_header, read_npz
 
 __all__ = [
     "MAX_ARRAY_BYTES",
@@ -51,6 +55,7 @@ __all__ = [
     "check_keys",
     "closest_key",
     "load_npy",
+    "load_npz",
     "parse_json",
     "parse_yaml",
     "read_json",
@@ -470,20 +475,41 @@ def read_yaml(
 # --------------------------------------------------------------------------------------------
 
 
-def load_npz(path: str | os.PathLike[str], what: str) -> dict[str, np.ndarray]:
+def load_npz(
+    path: str | os.PathLike[str], what: str, *, max_bytes: int = MAX_ARRAY_BYTES
+) -> dict[str, np.ndarray]:
     """Every array of an ``.npz`` file a run wrote (pose and view files), without
     unpickling anything.
 
+    The archive's declared sizes are bounded before anything is decompressed (at most
+    ``max_bytes`` in all, nothing a zip bomb declares) and each member's ``.npy`` header is
+    parsed and bounded by :func:`virtus.io.npyfile.read_npz` before its data is allocated.
+
     Raises
     ------
-    VirtusError : ``"<path>: not a readable <what> (<reason>)"`` for a missing, truncated or
-        foreign file.
+    InputError : ``"<path>: not a readable <what> (<reason>)"`` for a missing, truncated,
+        oversized or foreign file, a pickled member, a lying header.
     """
+    label = _label(what, Path(path))
     try:
-        with np.load(path, allow_pickle=False) as data:
-            return {key: data[key] for key in data.files}
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as error:
-        raise VirtusError(f"{path}: not a readable {what} ({error})") from None
+        checked = check_file(path, what, max_bytes=max_bytes, kind=".npz file")
+        return read_npz(checked, label, max_bytes=max_bytes)
+    except InputError as error:
+        where = error.name.removeprefix(label).strip() if error.name.startswith(label) else ""
+        detail = str(error).removeprefix(f"{error.name}: ")
+        raise _unreadable(path, what, f"{where}: {detail}" if where else detail) from None
+    except (OSError, ValueError, KeyError, EOFError, NotImplementedError, RuntimeError,
+            MemoryError, zipfile.BadZipFile) as error:  # fmt: skip
+        reason = str(error).splitlines()[0] if str(error) else type(error).__name__
+        raise _unreadable(path, what, reason) from None
+
+
+def _unreadable(path: str | os.PathLike[str], what: str, reason: str) -> InputError:
+    """``<path>: not a readable <what> (<reason>)`` as an :class:`InputError` (the line
+    :func:`load_npz` has always given, which callers and users match)."""
+    error = InputError(f"{what} {path}", f"a readable {what}", reason)
+    error.args = (f"{path}: not a readable {what} ({reason})",)
+    return error
 
 
 def load_npy(
@@ -496,9 +522,12 @@ def load_npy(
 ) -> np.ndarray:
     """Read a ``.npy`` array without unpickling anything.
 
-    The header is read first: object (pickled) arrays are refused, and the data size the
-    header announces must match the file's size, so a truncated or padded file is refused
-    before its data is allocated.
+    The header is parsed by virtus' own strict parser (:mod:`virtus.io.npyfile`, not
+    numpy's ``literal_eval``): magic, version, header length and dict, a plain dtype
+    (object, structured and sub-array dtypes refused) and a shape of non-negative integers
+    below 2**63; then ``prod(shape) * itemsize`` must equal the bytes after the header and
+    be at most ``max_bytes`` -- all before the data is allocated, so a 1 KB file declaring
+    terabytes is refused in microseconds.
 
     Parameters
     ----------
@@ -516,46 +545,19 @@ def load_npy(
     ------
     InputError
         Missing or too large, not a ``.npy`` file, a pickled or object array ("pickled
-        arrays are refused"), a truncated/corrupt file, or the wrong dtype or shape.
+        arrays are refused"), a malformed header, a truncated/corrupt file, or the wrong
+        dtype or shape.
     """
     path = check_file(path, what, max_bytes=max_bytes, kind=".npy file")
     label = _label(what, path)
-    fmt = np.lib.format
     try:
         with open(path, "rb") as stream:
-            if stream.read(1) == b"\x80":
-                raise InputError(label, "a .npy array", "pickled data (pickles are refused)")
-            stream.seek(0)
-            try:
-                version = fmt.read_magic(stream)
-            except ValueError:
-                raise InputError(label, "a .npy file", "no .npy header (bad magic)") from None
-            if version == (1, 0):
-                header = fmt.read_array_header_1_0(stream)
-            elif version == (2, 0):
-                header = fmt.read_array_header_2_0(stream)
-            else:
-                raise InputError(label, ".npy format version 1.0 or 2.0", f"{version}")
-            stored_shape, _, stored_dtype = header
-            if stored_dtype.hasobject:
-                raise InputError(
-                    label, "a numeric array", "an object array (pickled arrays are refused)"
-                )
-            announced = math.prod(stored_shape) * stored_dtype.itemsize
-            available = path.stat().st_size - stream.tell()
-            if announced != available:
-                problem = "truncated" if available < announced else "extra data"
-                raise InputError(
-                    label,
-                    f"{announced:,} data bytes for shape {stored_shape} {stored_dtype}",
-                    f"{available:,} bytes ({problem})",
-                )
-            stream.seek(0)
-            array = fmt.read_array(stream, allow_pickle=False)
+            size = os.fstat(stream.fileno()).st_size
+            header = read_npy_header(stream, label, size=size, max_bytes=max_bytes)
+            array = read_npy_data(stream, header, label)
     except InputError:
         raise
-    except (ValueError, OSError, EOFError, SyntaxError) as error:
-        # a corrupt header (numpy parses it with ast.literal_eval), an unreadable file
+    except (ValueError, OSError, EOFError, MemoryError) as error:
         got = str(error).splitlines()[0] if str(error) else type(error).__name__
         raise InputError(label, "a readable .npy file", got) from None
     if dtype is not None:
