@@ -5,7 +5,8 @@
 * :mod:`~virtus.patterns.sequence` -- ``PatternSequence``: frames that encode and plan their decode.
 * :mod:`~virtus.patterns.decode` -- decode plans, the decode driver and ``DecodeResult``.
 * :mod:`~virtus.patterns.files` -- the sequence description file (YAML/JSON), read and written.
-* :mod:`~virtus.patterns.catalog` -- built-in sequences: the paper's default, heterodyne.
+* :mod:`~virtus.patterns.catalog` -- built-in sequences: the paper's default, heterodyne,
+  OpenCV's Gray code alone.
 * :mod:`~virtus.patterns.phase` -- decoding math: wrapped phase, masks, unwrapping.
 """
 
@@ -15,6 +16,7 @@ from virtus.patterns.catalog import (
     build_sequence,
     default_sequence,
     heterodyne_sequence,
+    opencv_graycode_sequence,
 )
 from virtus.patterns.codings import MAX_BITS, BitCode, PhaseCoding, gray_bits_needed
 from virtus.patterns.decode import (
@@ -54,5 +56,6 @@ __all__ = [
     "gray_bits_needed",
     "heterodyne_sequence",
     "load_sequence_file",
+    "opencv_graycode_sequence",
     "phase",
 ]

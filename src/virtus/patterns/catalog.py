@@ -1,5 +1,6 @@
 """Built-in pattern sequences: :func:`build_sequence` (the standard frame order), the
-paper's :func:`default_sequence` and :func:`heterodyne_sequence`.
+paper's :func:`default_sequence` and :func:`heterodyne_sequence`, and OpenCV's Gray code
+alone, :func:`opencv_graycode_sequence`.
 
 The paper's default, 52 frames (:func:`default_sequence`, ``examples/sequences/paper.yaml``;
 :func:`build_sequence` order: per direction ``"v"`` then ``"h"``, per period ascending the
@@ -14,6 +15,22 @@ complementary frame; white and black last)::
     [49]     gray_complement, "h"
     [50]     white
     [51]     black
+
+OpenCV's ``structured_light.GrayCodePattern`` (:func:`opencv_graycode_sequence`, the
+``preset: opencv_graycode`` of a sequence file, ``examples/sequences/opencv_graycode.yaml``):
+with ``n = ceil(log2 width)`` column bits and ``m = ceil(log2 height)`` row bits, what
+``GrayCodePattern.generate`` returns, then white and black as users append them
+(``getImagesForShadowMasks``; OpenCV's capture sample appends white, then black), ``2 n +
+2 m + 2`` frames (44 for 912 x 1140, 42 for 1920 x 1080)::
+
+    [0:2n]        gray, "v", period 1, edge-aligned: bit 1..n (most significant first),
+                  each bit then its inverse: column j shows Gray bit of g = j ^ (j >> 1)
+    [2n:2n+2m]    gray, "h", the same for row i
+    [2n+2m]       white
+    [2n+2m+1]     black
+
+Each projector column (row) has its own code word, so the decode (pattern > inverse per
+bit, as OpenCV's ``getProjPixel``) gives the column (row) index itself.
 """
 
 from __future__ import annotations
@@ -32,6 +49,7 @@ __all__ = [
     "build_sequence",
     "default_sequence",
     "heterodyne_sequence",
+    "opencv_graycode_sequence",
 ]
 
 #: Three periods with 64, 63 and 56 fringes over 1152 px (Towers' optimum choice: C. E.
@@ -140,3 +158,49 @@ def heterodyne_sequence(
         white=white,
         black=black,
     )
+
+
+def _uniform_order(white_black: bool | Sequence[str]) -> tuple[str, ...]:
+    """The uniform frames appended after a code: True ``("white", "black")``, False none, or
+    the two kinds in the order given."""
+    if isinstance(white_black, bool | np.bool_):
+        return ("white", "black") if white_black else ()
+    order = tuple(white_black) if isinstance(white_black, Sequence) else None
+    if isinstance(white_black, str) or order is None or sorted(order) != ["black", "white"]:
+        raise InputError(
+            "white_black", "true, false, [white, black] or [black, white]", white_black
+        )
+    return order
+
+
+def opencv_graycode_sequence(
+    width: int, height: int, white_black: bool | Sequence[str] = True
+) -> PatternSequence:
+    """OpenCV's ``structured_light.GrayCodePattern`` frames (module docstring): per axis
+    ``ceil(log2 size)`` Gray bits, most significant first, each bit then its inverse,
+    columns then rows, then the uniform frames.
+
+    Parameters
+    ----------
+    width, height : projector size in px, each >= 2 (OpenCV's ``Params.width``/``height``).
+    white_black : True (default): white then black appended (OpenCV's capture sample);
+        False: none; ``("black", "white")`` (or ``("white", "black")``): both, in that order.
+
+    Returns
+    -------
+    :class:`PatternSequence` whose :meth:`~PatternSequence.images` are OpenCV's patterns
+    pixel for pixel, decoding to projector column and row indices.
+    """
+    width = positive_int("width", width, minimum=2)
+    height = positive_int("height", height, minimum=2)
+    uniform = _uniform_order(white_black)
+    frames: list[Frame] = []
+    for direction, span in zip(DIRECTIONS, (width, height), strict=True):
+        bits = (span - 1).bit_length()  # ceil(log2 span), as OpenCV computes it
+        frames += [
+            Frame("gray", direction, 1.0, bit=b, bits=bits, align="edge", inverted=inverse)
+            for b in range(1, bits + 1)
+            for inverse in (False, True)
+        ]
+    frames += [Frame(kind) for kind in uniform]
+    return PatternSequence(width, height, tuple(frames))

@@ -43,6 +43,18 @@ Conventions
   bits are the code of ``k = h >> 1``: its edges lie half a period from the order edges.
   ``inverted: true`` frames show the inverse of their bit; a bit projected both ways is
   read by comparing the two images, a single one by a threshold.
+* Codes alone (a direction without phase frames, e.g. OpenCV's ``GrayCodePattern``): the
+  code's ``period`` is its stripe width ``T`` in pattern units, and a pixel decodes to the
+  *stripe centre*: the index ``k`` (``h`` with the complementary frame) names the projector
+  pixels that show it, ``j_first..j_last``, and the decoded coordinate is their mid-point
+  ``(j_first + j_last) / 2`` px (pixel ``j``'s centre is ``j``, OpenCV's convention), exact
+  whatever the stripe width (:meth:`BitCode.cell_centres`). With ``align: edge`` and
+  ``T = scale`` (a word per projector pixel, as OpenCV's) that is ``k = j`` itself; with
+  ``T = scale L / 2**bits`` (``bits`` bits over ``L >= 2**bits`` px) pixel ``j`` shows
+  ``k = floor(j 2**bits / L)`` and stripe ``k`` spans pixels ``ceil(k L / 2**bits) ..
+  ceil((k + 1) L / 2**bits) - 1`` (for ``L / 2**bits = S`` whole: centre
+  ``k S + (S - 1) / 2``); these two are the defaults of a code block without ``period``
+  (:mod:`virtus.patterns.files`). An index no projector pixel shows is invalid.
 * Every frame is 8-bit: each value shown is ``round(255 v) / 255``. White frames show 1,
   black and ``ignore`` frames 0 (ignored frames are in a capture but not decoded).
 """
@@ -208,6 +220,33 @@ class BitCode:
         """(...) int64 index from binarised frames ``(bits (+1), ...)``, most significant
         first (complementary frame last): ``h`` with the complement, the order without."""
         return _phase.bits_to_index(bits, self.code)
+
+    def pixel_cells(self, span: int, scale: float = 1.0) -> np.ndarray:
+        """(span,) int64, non-decreasing: the index each projector pixel ``j = 0..span-1``
+        shows, as :meth:`decode` returns it (``h`` with the complement, the order without)."""
+        cells = self.half_index(scale * np.arange(positive_int("span", span), dtype=np.float64))
+        return cells if self.complement else cells >> 1
+
+    def cell_centres(self, index: np.ndarray, span: int, scale: float = 1.0) -> np.ndarray:
+        """Projector px of the centre of the stripe a decoded index names (a code decoded
+        alone, module docstring): ``(j_first + j_last) / 2`` over the projector pixels that
+        show ``index``, NaN for an index no pixel shows.
+
+        Parameters
+        ----------
+        index : (...) int, from :meth:`decode`.
+        span : projector px along the axis.
+        scale : pattern units per projector px.
+
+        Returns
+        -------
+        (...) float64, projector px along the axis (pixel ``j``'s centre is ``j``).
+        """
+        cells = self.pixel_cells(span, scale)
+        index = np.asarray(index, dtype=np.int64)
+        first = np.searchsorted(cells, index, side="left")
+        last = np.searchsorted(cells, index, side="right") - 1
+        return np.where(last >= first, 0.5 * (first + last), np.nan)
 
     def predicted_phase(self, index: np.ndarray, span: int, scale: float = 1.0) -> np.ndarray:
         """Absolute phase (rad) of the centre of the projector interval a decoded index

@@ -18,7 +18,11 @@ Decoding, per direction
   unwrapping, longest to shortest (``phase.unwrap_temporal``);
 * two or more phase sets otherwise: heterodyne, the longest beat with the finest must cover
   the axis (``phase.unwrap_heterodyne``);
-* one phase set whose period covers the axis: absolute as it is.
+* one phase set whose period covers the axis: absolute as it is;
+* a code alone, no phase frames (:func:`decode_code_only`, e.g. OpenCV's
+  ``GrayCodePattern``): the centre of the code's stripe (``proj_uv``; the column or row
+  index for a code per projector pixel), no phase (``phase_*`` NaN, ``period_*`` None), the
+  stripe width in ``stripe_*`` and the smallest bit contrast in ``confidence_*``.
 
 Gray/binary frames are thresholded at ``(mean white + mean black) / 2`` when the sequence
 has both, else at the phase background ``A``. Decoding says when it is likely wrong
@@ -26,7 +30,10 @@ has both, else at the phase background ``A``. Decoding says when it is likely wr
 than :data:`CODE_FLAG_RAD`, whose temporal/heterodyne residual exceeds
 :data:`RESIDUAL_FLAG_RAD`, or whose fringe order disagrees with their neighbours on a
 continuous surface (``phase.order_consistency``; this catches a wrong description, e.g.
-swapped alignment or bit order, which every single pixel would fit). Above
+swapped alignment or bit order, which every single pixel would fit), or, for a code alone,
+whose coordinate jumps away from most of their neighbours' (``phase.stripe_consistency``,
+which flags the whole direction when most changes between neighbours are such jumps: a
+wrong bit order or code). Above
 :data:`FLAG_WARN_FRACTION` of valid pixels a :class:`DecodeWarning` is issued.
 """
 
@@ -39,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from virtus.checks import positive
+from virtus.checks import finite, positive
 from virtus.errors import InputError
 from virtus.patterns import phase as _phase
 from virtus.patterns.codings import BitCode, PhaseCoding, axis_extent
@@ -56,6 +63,7 @@ __all__ = [
     "PhaseSet",
     "assemble_result",
     "check_neighbours",
+    "decode_code_only",
     "decode_frames",
     "runs_neighbour_check",
 ]
@@ -71,6 +79,11 @@ RESIDUAL_FLAG_RAD = 0.4 * np.pi
 _RESIDUAL_INVALID_RAD = 0.5 * np.pi
 #: decode warns when more than this share of valid pixels is flagged.
 FLAG_WARN_FRACTION = 0.05
+#: A code alone: neighbouring camera pixels whose coordinates differ by more than this many
+#: stripes, and more than :data:`STRIPE_JUMP_PX`, jump (a continuous surface changes by
+#: about a stripe; a misread bit, a wrong bit order or code by far more).
+STRIPE_JUMP_STRIPES = 2.0
+STRIPE_JUMP_PX = 8.0
 
 
 class DecodeWarning(UserWarning):
@@ -84,23 +97,39 @@ class DecodeResult:
     Attributes
     ----------
     proj_uv : (H, W, 2) float64, projector coordinates ``(u_p, v_p)`` in px; ``u_p`` is NaN
-        where ``mask_v`` is False, ``v_p`` where ``mask_h`` is False.
+        where ``mask_v`` is False, ``v_p`` where ``mask_h`` is False. A direction decoded
+        from a code alone holds the centre of the stripe its code names
+        (:mod:`~virtus.patterns.codings`): the projector column (row) index for a code per
+        pixel, as OpenCV's ``GrayCodePattern`` decodes it.
     phase_v, phase_h : (H, W) float64, absolute phase in radians of the direction's finest
         period (``Phi = 2 pi w / period_v``, ``w`` the pattern coordinate, ``= u_p`` at scale
-        1); NaN where invalid or the direction is absent.
+        1); NaN where invalid, where the direction is absent and everywhere for a direction
+        decoded from a code alone (it has no phase).
     modulation : (H, W) float64, fringe modulation ``B`` in frame units: the smallest over
-        the sequence's phase sets.
-    background : (H, W) float64, background ``A`` in frame units: the mean over the phase sets.
+        the sequence's phase sets (and its codes alone: half their ``confidence``).
+    background : (H, W) float64, background ``A`` in frame units: the mean over the phase sets
+        (and codes alone: ``(white + black) / 2``, else the mean of their pattern/inverse
+        pairs).
     mask : (H, W) bool, valid in every direction the sequence has.
     mask_v, mask_h : (H, W) bool, valid per direction (all False for an absent direction).
-    period_v, period_h : the finest period (pattern units) of each direction, ``None`` if absent.
+    period_v, period_h : the finest period (pattern units) of each direction, ``None`` if
+        absent or decoded from a code alone.
     flagged : (H, W) bool, valid pixels (in some direction) whose fringe order is likely
         wrong: ``flagged_v | flagged_h``.
     flagged_v, flagged_h : (H, W) bool, per direction, within ``mask_v`` / ``mask_h``.
-    modulation_v, modulation_h : (H, W) float64, ``B`` per direction (frame units; NaN if absent).
+    modulation_v, modulation_h : (H, W) float64, ``B`` per direction (frame units; NaN if
+        absent; half of ``confidence_*`` for a code alone).
     repaired : pixels whose fringe order was repaired (``decode(repair=True)``), all
-        directions counted.
+        directions counted (codes alone are flagged, never repaired).
     full_scale : the frames' full scale (frame units).
+    confidence_v, confidence_h : (H, W) float64, directions decoded from a code alone: the
+        smallest contrast of the pixel's bits in frame units (``|pattern - inverse|`` for a
+        pair, ``2 |frame - (white + black) / 2|`` for a single frame), which ``mask_*``
+        compares with ``min_contrast * full_scale``; NaN for other directions.
+    confidence : (H, W) float64, the smallest ``confidence_*`` (NaN without a code alone).
+    stripe_v, stripe_h : stripe width in projector px (code period / scale, halved with the
+        complementary frame) of a direction decoded from a code alone (1 for OpenCV's Gray
+        code), else ``None``.
     """
 
     proj_uv: np.ndarray
@@ -120,6 +149,11 @@ class DecodeResult:
     modulation_h: np.ndarray | None = None
     repaired: int = 0
     full_scale: float = 1.0
+    confidence: np.ndarray | None = None
+    confidence_v: np.ndarray | None = None
+    confidence_h: np.ndarray | None = None
+    stripe_v: float | None = None
+    stripe_h: float | None = None
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready decode statistics.
@@ -132,7 +166,8 @@ class DecodeResult:
         ``valid_fraction``, ``flagged_fraction`` (of that direction's valid pixels) and
         ``modulation`` / ``modulation_rel``: percentiles ``p5``, ``p50``, ``p95`` of ``B``
         over all camera pixels (so a capture that decodes nowhere still says why), in frame
-        units and as a fraction of ``full_scale``. Undefined values are None.
+        units and as a fraction of ``full_scale``; a direction decoded from a code alone has
+        ``period`` None and its ``stripe`` width (px) too. Undefined values are None.
         """
         any_valid = self.mask_v | self.mask_h
         out: dict[str, Any] = {
@@ -143,7 +178,8 @@ class DecodeResult:
         }
         for direction in DIRECTIONS:
             period = getattr(self, f"period_{direction}")
-            if period is None:
+            stripe = getattr(self, f"stripe_{direction}")
+            if period is None and stripe is None:
                 continue
             mask = getattr(self, f"mask_{direction}")
             values = getattr(self, f"modulation_{direction}")
@@ -152,12 +188,14 @@ class DecodeResult:
                 np.percentile(finite_values, (5, 50, 95)) if finite_values.size else [np.nan] * 3
             )
             out[direction] = {
-                "period": float(period),
+                "period": None if period is None else float(period),
                 "valid_fraction": _share(mask, np.ones_like(mask)),
                 "flagged_fraction": _share(getattr(self, f"flagged_{direction}"), mask),
                 "modulation": _percentiles(levels, 1.0),
                 "modulation_rel": _percentiles(levels, self.full_scale),
             }
+            if stripe is not None:
+                out[direction]["stripe"] = float(stripe)
         return out
 
 
@@ -201,7 +239,7 @@ class DecodePlan:
     """Which frames decode one direction, and how (checked once, when a
     :class:`PatternSequence` is made; :meth:`PatternSequence.plan`)."""
 
-    method: str  # "code", "temporal", "heterodyne" or "window"
+    method: str  # "code", "temporal", "heterodyne", "window" or "code_only" (no sets)
     sets: tuple[PhaseSet, ...]  # ascending period: sets[0] is the reported (finest) period
     code: CodePlan | None = None
 
@@ -225,6 +263,7 @@ def decode_frames(
     full_scale: float | None = None,
     repair: bool = False,
     neighbour_check: bool | None = None,
+    min_contrast: float = 0.02,
 ) -> DecodeResult:
     """Decode camera images of a sequence into projector coordinates by its decode plans:
     what :meth:`PatternSequence.decode <virtus.patterns.PatternSequence.decode>` runs
@@ -239,6 +278,9 @@ def decode_frames(
     scale : pattern units per projector px for directions ``("v", "h")``.
     """
     stack = _check_frames(frames, len(kinds))
+    min_contrast = finite("min_contrast", min_contrast)
+    if not 0.0 <= min_contrast < 1.0:
+        raise InputError("min_contrast", "a fraction of full scale in [0, 1)", min_contrast)
     if full_scale is None:
         integer = np.issubdtype(stack.dtype, np.integer)
         full_scale = float(np.iinfo(stack.dtype).max) if integer else 1.0
@@ -250,7 +292,8 @@ def decode_frames(
             "frames", f"values <= full_scale ({full_scale:g}); pass full_scale", stack.max()
         )
     shape = stack.shape[1:]
-    threshold = _threshold(stack, kinds)
+    uniform = _uniform_means(stack, kinds)
+    threshold = None if uniform is None else 0.5 * (uniform[0] + uniform[1])
     nan = np.full(shape, np.nan)
     none = np.zeros(shape, dtype=bool)
     out: dict[str, dict[str, Any]] = {}
@@ -262,15 +305,24 @@ def decode_frames(
         if plan is None:
             out[direction] = {"phase": nan, "valid": none, "flags": none, "modulation": nan}
             continue
-        decoded = _decode_direction(
-            stack, plan, span, axis_scale, threshold, min_modulation, saturation_level, full_scale
-        )
+        if plan.method == "code_only":
+            decoded = decode_code_only(
+                stack, plan, span, axis_scale, uniform, min_contrast=min_contrast,
+                saturation_level=saturation_level, full_scale=full_scale,
+            )  # fmt: skip
+        else:
+            decoded = _decode_direction(
+                stack, plan, span, axis_scale, threshold, min_modulation, saturation_level,
+                full_scale,
+            )  # fmt: skip
         modulations += decoded.pop("modulations")
         backgrounds += decoded.pop("backgrounds")
         if runs_neighbour_check(plan, neighbour_check, repair):
             repaired += check_neighbours(plan, span, axis_scale, decoded, repair)
         decoded["flags"] &= decoded["valid"]
         decoded["phase"] = np.where(decoded["valid"], decoded["phase"], np.nan)
+        if "coordinate" in decoded:
+            decoded["coordinate"] = np.where(decoded["valid"], decoded["coordinate"], np.nan)
         out[direction] = decoded
     return assemble_result(
         out,
@@ -304,7 +356,8 @@ def assemble_result(
     full_scale: float,
 ) -> DecodeResult:
     """The :class:`DecodeResult` of per-direction decodes (``out[d]``: ``phase`` NaN
-    where invalid, ``valid``, ``flags`` within it, ``modulation``; every direction of
+    where invalid, ``valid``, ``flags`` within it, ``modulation``, for a code alone
+    ``coordinate`` (px, NaN where invalid) and ``confidence``; every direction of
     :data:`DIRECTIONS`) of a sequence with these ``plans`` and ``scale`` (pattern units per
     projector px for ``("v", "h")``), warning when many pixels are flagged. Shared by the
     host decoder and the device decoder's
@@ -315,9 +368,15 @@ def assemble_result(
     for direction in directions:
         mask &= out[direction]["valid"]
     coordinates = [
-        _coordinate(plans.get(d), s, out[d]["phase"])
+        out[d]["coordinate"]
+        if "coordinate" in out[d]
+        else _coordinate(plans.get(d), s, out[d]["phase"])
         for d, s in zip(DIRECTIONS, scale, strict=True)
     ]
+    nan = np.full(shape, np.nan)
+    confidences = {d: out[d].get("confidence", nan) for d in DIRECTIONS}
+    alone = [confidences[d] for d in directions if "confidence" in out[d]]
+    stripes = {d: _stripe(plans.get(d), s) for d, s in zip(DIRECTIONS, scale, strict=True)}
     result = DecodeResult(
         proj_uv=np.stack(coordinates, axis=-1),
         phase_v=out["v"]["phase"],
@@ -327,8 +386,8 @@ def assemble_result(
         mask=mask,
         mask_v=out["v"]["valid"],
         mask_h=out["h"]["valid"],
-        period_v=plans["v"].periods[0] if "v" in plans else None,
-        period_h=plans["h"].periods[0] if "h" in plans else None,
+        period_v=plans["v"].periods[0] if "v" in plans and plans["v"].periods else None,
+        period_h=plans["h"].periods[0] if "h" in plans and plans["h"].periods else None,
         flagged=out["v"]["flags"] | out["h"]["flags"],
         flagged_v=out["v"]["flags"],
         flagged_h=out["h"]["flags"],
@@ -336,6 +395,11 @@ def assemble_result(
         modulation_h=out["h"]["modulation"],
         repaired=repaired,
         full_scale=full_scale,
+        confidence=np.minimum.reduce(alone) if alone else nan,
+        confidence_v=confidences["v"],
+        confidence_h=confidences["h"],
+        stripe_v=stripes["v"],
+        stripe_h=stripes["h"],
     )
     _warn_if_flagged(result)
     return result
@@ -345,7 +409,15 @@ def check_neighbours(
     plan: DecodePlan | None, span: int, scale: float, decoded: dict[str, Any], repair: bool
 ) -> int:
     """Flag (or repair) orders that disagree with neighbours; returns pixels repaired
-    (``plan``'s direction: ``span`` projector px, ``scale`` pattern units per px)."""
+    (``plan``'s direction: ``span`` projector px, ``scale`` pattern units per px). A code
+    alone is flagged where its coordinate jumps (``phase.stripe_consistency``), never
+    repaired."""
+    stripe = _stripe(plan, scale)
+    if stripe is not None:
+        limit = max(STRIPE_JUMP_STRIPES * stripe, STRIPE_JUMP_PX)
+        jumps = _phase.stripe_consistency(decoded["coordinate"], decoded["valid"], limit)
+        decoded["flags"] = decoded["flags"] | jumps
+        return 0
     spatial, correction = _phase.order_consistency(
         decoded["phase"], decoded.pop("wrapped"), decoded["valid"]
     )
@@ -373,14 +445,23 @@ def _check_frames(frames: np.ndarray, count: int) -> np.ndarray:
     return stack
 
 
-def _threshold(stack: np.ndarray, kinds: Sequence[str]) -> np.ndarray | None:
-    """``(mean white + mean black) / 2`` (float64), or None without both kinds."""
+def _stripe(plan: DecodePlan | None, scale: float) -> float | None:
+    """Stripe width (projector px) of a code alone: its period, half of it with the
+    complementary frame; None for other plans."""
+    if plan is None or plan.method != "code_only":
+        return None
+    coding = plan.code.coding  # type: ignore[union-attr]
+    return coding.period / scale / (2.0 if coding.complement else 1.0)
+
+
+def _uniform_means(stack: np.ndarray, kinds: Sequence[str]) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(mean white, mean black)`` (float64), or None without both kinds."""
     whites = [i for i, kind in enumerate(kinds) if kind == "white"]
     blacks = [i for i, kind in enumerate(kinds) if kind == "black"]
     if not whites or not blacks:
         return None
     white = stack[whites].mean(axis=0, dtype=np.float64)
-    return 0.5 * (white + stack[blacks].mean(axis=0, dtype=np.float64))
+    return white, stack[blacks].mean(axis=0, dtype=np.float64)
 
 
 def _coordinate(plan: DecodePlan | None, scale: float, absolute: np.ndarray) -> np.ndarray:
@@ -452,6 +533,89 @@ def _decode_direction(
         "modulation": np.minimum.reduce(modulations),
         "modulations": modulations,
         "backgrounds": backgrounds,
+    }
+
+
+def decode_code_only(
+    stack: np.ndarray,
+    plan: DecodePlan,
+    span: int,
+    scale: float,
+    uniform: tuple[np.ndarray, np.ndarray] | None,
+    *,
+    min_contrast: float,
+    saturation_level: float | None,
+    full_scale: float,
+) -> dict[str, Any]:
+    """Decode a direction from its code alone (``plan.method == "code_only"``).
+
+    Each bit of a pattern/inverse pair is ``pattern > inverse`` (OpenCV's
+    ``GrayCodePattern`` rule) with contrast ``|pattern - inverse|``; a single bit frame is
+    compared with ``t = (white + black) / 2`` (its inverse frame alone: ``frame <= t``) with
+    contrast ``2 |frame - t|``, the pair's contrast for a pixel that sees exactly white or
+    black. The index (Gray or plain binary, :meth:`BitCode.decode`) gives the centre of its
+    stripe (:meth:`BitCode.cell_centres`, px).
+
+    Parameters
+    ----------
+    stack : (F, H, W) frames.
+    plan : the direction's plan; ``span`` projector px along its axis, ``scale`` pattern
+        units per px.
+    uniform : ``(mean white, mean black)`` (float64), required when a bit has a single frame.
+    min_contrast : valid pixels have every bit contrast ``>= min_contrast * full_scale``
+        and, with a single frame, ``white - black`` too; an index that no projector pixel
+        shows is invalid.
+    saturation_level : a pixel reaching it in any code frame is invalid; None: no check.
+    full_scale : the frames' full scale.
+
+    Returns
+    -------
+    dict of (H, W) maps: ``phase`` (NaN), ``coordinate`` (px), ``valid``, ``flags`` (False),
+    ``confidence`` (smallest bit contrast, frame units), ``modulation`` (half of it), and
+    the lists ``modulations``, ``backgrounds`` (``(white + black) / 2``, else the mean of
+    the pairs).
+    """
+    code = plan.code
+    coding = code.coding  # type: ignore[union-attr]
+    shape = stack.shape[1:]
+    single = None in code.normal or None in code.inverse  # type: ignore[union-attr]
+    if single and uniform is None:
+        raise InputError("frames", "white and black frames for single code frames", "none")
+    threshold = None if uniform is None else 0.5 * (uniform[0] + uniform[1])
+    confidence = np.full(shape, np.inf)
+    pairs, indices = [], []
+    for normal, inverse in zip(code.normal, code.inverse, strict=True):  # type: ignore[union-attr]
+        shown = [i for i in (normal, inverse) if i is not None]
+        indices += shown
+        values = [stack[i].astype(np.float64) for i in shown]
+        if len(values) == 2:
+            contrast = np.abs(values[0] - values[1])
+            pairs.append(0.5 * (values[0] + values[1]))
+        else:
+            contrast = 2.0 * np.abs(values[0] - threshold)
+        np.minimum(confidence, contrast, out=confidence)
+    index = coding.decode(_read_bits(stack, code, threshold))  # type: ignore[arg-type]
+    coordinate = coding.cell_centres(index, span, scale)
+    valid = np.isfinite(coordinate) & _phase.quality_mask(
+        confidence,
+        min_modulation=min_contrast,
+        full_scale=full_scale,
+        frames=None if saturation_level is None else stack[indices],
+        saturation_level=saturation_level,
+    )
+    if single:
+        valid &= uniform[0] - uniform[1] >= min_contrast * full_scale  # type: ignore[index]
+    background = threshold if threshold is not None else np.mean(pairs, axis=0)
+    modulation = 0.5 * confidence
+    return {
+        "phase": np.full(shape, np.nan),
+        "coordinate": coordinate,
+        "valid": valid,
+        "flags": np.zeros(shape, dtype=bool),
+        "confidence": confidence,
+        "modulation": modulation,
+        "modulations": [modulation],
+        "backgrounds": [background],
     }
 
 

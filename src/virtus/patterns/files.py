@@ -17,7 +17,8 @@ Read by :func:`load_sequence_file` (``.yaml``, ``.yml``, ``.json``; at most 1 MB
     scale: {v: 1, h: 2}               # optional pattern units per projector px, per direction
     description: free text            # optional
     blocks: [...]                     # compact form, or
-    frames: [...]                     # the lossless per-frame form (what to_dict writes)
+    frames: [...]                     # the lossless per-frame form (what to_dict writes), or
+    preset: opencv_graycode           # a whole capture named in one line (below)
     files: [000.png, ...]             # optional, one image per frame (importing captures)
     bit_depth: 8                      # optional; only 8
 
@@ -29,6 +30,30 @@ Read by :func:`load_sequence_file` (``.yaml``, ``.yml``, ``.json``; at most 1 MB
      bit_order: msb_first, align: centre, complement: false,   # optional, these defaults
      inverted: false}       # true: each bit (and complement) as a pair: frame, then inverse
     {kind: white, count: 1}                                    # white, black or ignore
+
+A direction may have a code and no phase frames (a Gray-code-only or binary-only capture):
+it decodes to the centre of the code's stripe, the column (row) index for a code per
+projector pixel (:mod:`virtus.patterns.codings`). Its ``period`` is the stripe width in
+pattern units; left out, it is ``scale * span / 2**bits`` when the code has fewer words
+than the axis has pixels (``span`` = ``width`` for ``v``, ``height`` for ``h``; pixel ``j``
+shows stripe ``floor(j 2**bits / span)``), else ``scale`` (a word per pixel: pixel ``j``
+shows ``j``), and ``align`` defaults to ``edge``. A bit shown without its inverse frame
+needs white and black frames (its threshold is ``(white + black) / 2``)::
+
+    {kind: binary, direction: h, bits: 8, bit_order: lsb_first, inverted: true}
+
+``preset: opencv_graycode`` stands for OpenCV's ``structured_light.GrayCodePattern``
+capture of a ``width`` x ``height`` projector, exactly the frames it generates
+(:func:`~virtus.patterns.catalog.opencv_graycode_sequence`): ``ceil(log2 width)`` column
+bits, most significant first, each bit then its inverse, the row bits the same way, then
+white and black. Optional ``white_black: true`` (the default: white then black, as
+OpenCV's capture sample appends them), ``false`` (none), or ``[black, white]`` for that
+order. No ``scale``, ``blocks`` or ``frames`` with it::
+
+    width: 912
+    height: 1140
+    preset: opencv_graycode           # 2*10 + 2*11 + 2 = 44 frames
+    white_black: true                 # optional
 
 ``frames`` entries are :meth:`Frame.to_dict` dicts: ``kind`` plus the fields that apply
 (``direction``, ``period``, ``step``/``steps``, ``bit``/``bits``, ``profile``, ``offset``,
@@ -59,9 +84,15 @@ from virtus.patterns.frames import (
     Frame,
     _known_keys,
 )
-from virtus.patterns.sequence import LEVELS, PatternSequence
+from virtus.patterns.sequence import LEVELS, PatternSequence, _scale_pair
 
-__all__ = ["load_sequence_file", "save_sequence", "sequence_from_dict", "sequence_to_dict"]
+__all__ = [
+    "PRESETS",
+    "load_sequence_file",
+    "save_sequence",
+    "sequence_from_dict",
+    "sequence_to_dict",
+]
 
 _FORMAT = "virtus.pattern_sequence"
 _VERSION = 2
@@ -78,7 +109,11 @@ _TOP_KEYS = (
     "blocks",
     "frames",
     "files",
+    "preset",
+    "white_black",
 )
+#: ``preset`` values.
+PRESETS = ("opencv_graycode",)
 _BLOCK_KEYS = {
     "phase": ("kind", "direction", "period", "periods", "steps", "profile", "offset", "sign"),
     "code": (
@@ -132,10 +167,14 @@ def sequence_from_dict(
         raise InputError("version", f"one of {_READS_VERSIONS}", data.get("version"))
     if data.get("bit_depth", 8) != 8:
         raise InputError("bit_depth", "8", data.get("bit_depth"))
+    if "preset" in data:
+        return _preset(data, cls)
+    if "white_black" in data:
+        raise InputError("white_black", "a key of a 'preset' description only", sorted(data))
     if ("frames" in data) == ("blocks" in data):
         raise InputError("sequence", "exactly one of 'frames' and 'blocks'", sorted(data))
     if "blocks" in data:
-        frames = _expand_blocks(data["blocks"])
+        frames = _expand_blocks(data["blocks"], data)
     else:
         frames = _frames_from_entries(data["frames"])
     sequence = cls(data.get("width"), data.get("height"), frames, data.get("scale"))  # type: ignore[arg-type]
@@ -183,8 +222,27 @@ def _flag(name: str, value: Any) -> bool:
     return value
 
 
-def _expand_blocks(blocks: Any) -> tuple[Frame, ...]:
-    """Frames from the compact ``blocks`` list (module docstring), bounds checked first."""
+def _preset(data: Mapping[str, Any], cls: type[PatternSequence]) -> PatternSequence:
+    """The sequence a ``preset`` description names (module docstring)."""
+    from virtus.patterns.catalog import opencv_graycode_sequence  # catalog imports sequence
+
+    _choice("preset", data["preset"], PRESETS)
+    clash = sorted(k for k in ("blocks", "frames", "scale") if k in data)
+    if clash:
+        raise InputError("preset", "no 'blocks', 'frames' or 'scale' beside it", clash)
+    built = opencv_graycode_sequence(
+        data.get("width"),  # type: ignore[arg-type]
+        data.get("height"),  # type: ignore[arg-type]
+        white_black=data.get("white_black", True),
+    )
+    sequence = built if cls is PatternSequence else cls(built.width, built.height, built.frames)
+    _files(data, len(sequence))
+    return sequence
+
+
+def _expand_blocks(blocks: Any, data: Mapping[str, Any]) -> tuple[Frame, ...]:
+    """Frames from the compact ``blocks`` list (module docstring), bounds checked first
+    (``data``: the description, whose size and scale give a code's default period)."""
     if not isinstance(blocks, list) or not blocks:
         raise InputError("blocks", "a non-empty list of block mappings", blocks)
     frames: list[Frame] = []
@@ -196,7 +254,7 @@ def _expand_blocks(blocks: Any) -> tuple[Frame, ...]:
         if kind == "phase":
             frames += _phase_block(name, block, len(frames))
         elif kind in _CODE_KINDS:
-            frames += _code_block(name, block, len(frames))
+            frames += _code_block(name, block, len(frames), data)
         elif kind in _UNIFORM_KINDS:
             _known_keys(name, block, _BLOCK_KEYS["uniform"])
             count = _count(f"{name}.count", block.get("count", 1), len(frames))
@@ -224,7 +282,9 @@ def _phase_block(name: str, block: Mapping[str, Any], total: int) -> list[Frame]
     ]
 
 
-def _code_block(name: str, block: Mapping[str, Any], total: int) -> list[Frame]:
+def _code_block(
+    name: str, block: Mapping[str, Any], total: int, data: Mapping[str, Any]
+) -> list[Frame]:
     _known_keys(name, block, _BLOCK_KEYS["code"])
     bits = positive_int(f"{name}.bits", block.get("bits"))
     if bits > MAX_BITS:
@@ -235,6 +295,13 @@ def _code_block(name: str, block: Mapping[str, Any], total: int) -> list[Frame]:
     polarities = (False, True) if inverted else (False,)
     _count(name, (bits + complement) * len(polarities), total)
     common = {"align": block.get("align"), "period": block.get("period")}
+    if "period" not in block:  # a code alone: 2**bits stripes over the axis, from pixel 0
+        direction = _choice(f"{name}.direction", block.get("direction"), DIRECTIONS)
+        size = "width" if direction == "v" else "height"
+        span = positive_int(size, data.get(size))
+        scale = _scale_pair(data.get("scale"))[DIRECTIONS.index(direction)]
+        stripe = max(1.0, span / 2.0**bits)  # px; a word per pixel when there are enough
+        common = {"align": block.get("align", "edge"), "period": scale * stripe}
     kind = block["kind"]
     sequence = range(1, bits + 1) if order == "msb_first" else range(bits, 0, -1)
     frames = [

@@ -76,7 +76,8 @@ class Frame:
     direction : ``"v"`` (varies along u_p), ``"h"`` (varies along v_p), ``None`` for the
         uniform white, black and ignore frames.
     period : fringe period ``T`` in pattern units (phase frames; for code frames the period
-        whose fringe order they encode), ``None`` for uniform frames.
+        whose fringe order they encode, or in a direction without phase frames the code's
+        stripe width), ``None`` for uniform frames.
     step, steps : phase frames only: shift index ``n`` in ``1..N`` and ``N >= 3``.
     bit, bits : Gray/binary bit frames only: bit index in ``1..bits``, 1 the most
         significant; ``bits <= MAX_BITS``.

@@ -107,8 +107,11 @@ class PatternSequence:
     one phase set plus a complete code of the same period (each bit once, plain or as an
     inverted pair, and optionally the complementary frame), enough bits to number every
     order; two or more phase sets (multi-wavelength when the longest period covers the axis,
-    else heterodyne with a beat that covers it); or one phase set whose period covers the
-    axis. White, black and ignore frames may appear any number of times, anywhere.
+    else heterodyne with a beat that covers it); one phase set whose period covers the
+    axis; or a complete code alone (no phase frames: decoded to the centres of its stripes,
+    :mod:`~virtus.patterns.codings`; a bit without its inverse frame needs white and black
+    frames for its threshold). White, black and ignore frames may appear any number of
+    times, anywhere.
 
     Raises
     ------
@@ -195,10 +198,12 @@ class PatternSequence:
         mine = [(i, f) for i, f in enumerate(self.frames) if f.direction == direction]
         if not mine:
             return None
+        code_frames = [(i, f) for i, f in mine if f.kind != "phase"]
+        if len(code_frames) == len(mine):  # a code alone: decoded to stripe centres
+            return DecodePlan("code_only", (), self._code_plan(direction, None, code_frames))
         sets = _phase_sets(direction, [(i, f) for i, f in mine if f.kind == "phase"])
         periods = tuple(s.coding.period for s in sets)
         extent = self.extent(direction)
-        code_frames = [(i, f) for i, f in mine if f.kind != "phase"]
         if code_frames:
             return DecodePlan("code", sets, self._code_plan(direction, periods, code_frames))
         if len(periods) == 1:
@@ -221,14 +226,19 @@ class PatternSequence:
         return DecodePlan("heterodyne", sets)
 
     def _code_plan(
-        self, direction: str, periods: tuple[float, ...], frames: list[tuple[int, Frame]]
+        self, direction: str, periods: tuple[float, ...] | None, frames: list[tuple[int, Frame]]
     ) -> CodePlan:
-        """Check a direction's code frames and say which frame shows which bit."""
-        if len(periods) != 1 or any(f.period != periods[0] for _, f in frames):
+        """Check a direction's code frames and say which frame shows which bit
+        (``periods`` None: a code alone, whose frames share one period, the stripe width)."""
+        period = frames[0][1].period if periods is None else periods[0]
+        if (periods is not None and len(periods) != 1) or any(
+            f.period != period for _, f in frames
+        ):
+            what = "one period (stripe width)" if periods is None else "exactly one phase period"
             raise InputError(
                 "frames",
-                f"code frames with exactly one phase period, the same ({direction!r})",
-                sorted({periods[0], *(f.period for _, f in frames)}),
+                f"code frames with {what}, the same ({direction!r})",
+                sorted({period, *(f.period for _, f in frames)}),
             )
         kinds = {(_CODE_KINDS.get(f.kind) or _COMPLEMENT_KINDS[f.kind], f.align) for _, f in frames}
         if len(kinds) != 1:
@@ -256,14 +266,24 @@ class PatternSequence:
         complement = (0, False) in slots or (0, True) in slots
         if complement:
             order.append(0)
-        coding = BitCode(code, periods[0], bits, align, complement)  # type: ignore[arg-type]
+        single = any((b, False) not in slots or (b, True) not in slots for b in order)
+        kinds = {f.kind for f in self.frames}
+        if periods is None and single and not {"white", "black"} <= kinds:
+            raise InputError(
+                "frames",
+                f"white and black frames, or an inverse frame for every code bit: without "
+                f"phase frames ({direction!r}) single code frames are thresholded at "
+                f"(white + black) / 2",
+                f"no {' or '.join(k for k in ('white', 'black') if k not in kinds)} frame",
+            )
+        coding = BitCode(code, period, bits, align, complement)  # type: ignore[arg-type]
         span, scale = self.span(direction), self.axis_scale(direction)
         need = coding.bits_needed(span, scale)
         if bits < need:  # type: ignore[operator]
             extra = ", with the complement" if complement else ""
             raise InputError(
                 "bits",
-                f">= {need} to number every period-{periods[0]:g} fringe over {span} px "
+                f">= {need} to number every period-{period:g} fringe over {span} px "
                 f"({align}-aligned{extra})",
                 bits,
             )
@@ -383,6 +403,7 @@ class PatternSequence:
         full_scale: float | None = None,
         repair: bool = False,
         neighbour_check: bool | None = None,
+        min_contrast: float = 0.02,
     ) -> DecodeResult:
         """Decode camera images of this sequence into projector coordinates.
 
@@ -393,7 +414,8 @@ class PatternSequence:
         min_modulation : a pixel is valid in a direction when every phase set of that
             direction has modulation ``B >= min_modulation * full_scale``.
         saturation_level : a pixel reaching this value (frame units, e.g. 255 for 8-bit) in
-            any phase frame of a direction is invalid in it; ``None`` disables the check.
+            any phase frame of a direction (code frame of a code alone) is invalid in it;
+            ``None`` disables the check.
         full_scale : the frames' full scale; default ``iinfo(dtype).max`` for integer frames
             (255 for uint8) and 1.0 for float frames (normalised images); frames above it
             are refused.
@@ -404,7 +426,15 @@ class PatternSequence:
             for directions without a per-pixel check, i.e. codes without the complementary
             frame (the complement and the unwrapping residual check each pixel alone, and the
             neighbour check costs about 0.25 s per direction at 960 x 960); ``repair``
-            turns it on.
+            turns it on. Codes alone (no phase frames) have no per-pixel check: theirs
+            (``phase.stripe_consistency``) flags coordinates that jump away from their
+            neighbours, and never repairs.
+        min_contrast : directions decoded from a code alone (no phase frames): a pixel is
+            valid when its every bit contrast is ``>= min_contrast * full_scale``, and, where
+            bits are thresholded, ``white - black`` is too. Default 0.02: 5.1 DN at 8 bit.
+            ``5 / 255`` on 8-bit frames is OpenCV ``GrayCodePattern``'s rule exactly (a
+            pixel is decoded when every ``|pattern - inverse| >= 5``; its separate shadow
+            mask, ``white - black > 40``, is not applied).
 
         Returns
         -------
@@ -422,6 +452,14 @@ class PatternSequence:
         images). Temporal and heterodyne pixels whose unwrapping residual exceeds ``pi / 2``
         are invalid (order unreliable). Coordinates decoded outside ``[-1, L]`` px (more
         than half a pixel beyond the projector) are invalid.
+
+        A direction without phase frames decodes from its code alone
+        (:func:`~virtus.patterns.decode.decode_code_only`): ``proj_uv`` holds the centre of
+        the code's stripe (the projector column or row index for a code per pixel),
+        ``phase_*`` is NaN and ``period_*`` None, ``stripe_*`` the stripe width and
+        ``confidence_*`` the smallest bit contrast; each bit of a pattern/inverse pair is
+        ``pattern > inverse`` with contrast ``|pattern - inverse|``, a single bit frame is
+        compared with ``(white + black) / 2`` with contrast ``2 |frame - threshold|``.
         """
         return _decode.decode_frames(
             frames,
@@ -434,6 +472,7 @@ class PatternSequence:
             full_scale=full_scale,
             repair=repair,
             neighbour_check=neighbour_check,
+            min_contrast=min_contrast,
         )
 
     def runs_neighbour_check(

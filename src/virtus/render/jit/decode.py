@@ -221,7 +221,9 @@ class DeviceDecode:
 
 def supports(sequence: PatternSequence) -> bool:
     """True when :func:`decode_on_device` decodes ``sequence`` (every plan uses a method of
-    :data:`METHODS`, codes of at most 31 bits with the complement)."""
+    :data:`METHODS`, codes of at most 31 bits with the complement). Not decoded here:
+    directions of a code alone (``"code_only"``, e.g. OpenCV's Gray code): decode those on
+    the host, :meth:`PatternSequence.decode <virtus.patterns.PatternSequence.decode>`."""
     for plan in sequence.plans().values():
         if plan.method not in METHODS:
             return False
@@ -306,7 +308,8 @@ def decode_on_device(
         raise VirtusError(
             f"decode_on_device: unsupported sequence (methods "
             f"{sorted({p.method for p in sequence.plans().values()})}, "
-            f"supported {list(METHODS)}, codes of at most 31 bits)"
+            f"supported {list(METHODS)}, codes of at most 31 bits); decode it on the host "
+            "with PatternSequence.decode"
         )
     if precision not in PRECISIONS:
         raise InputError("precision", f"one of {PRECISIONS}", precision)
