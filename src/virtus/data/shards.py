@@ -5,7 +5,7 @@ each encoded by the chunk codecs (``bytes``, then a compressor), one after anoth
 (Morton) chunk order, then the index -- ``(offset, nbytes)`` as little-endian uint64 per
 chunk, ``2**64 - 1`` twice for a chunk that is absent or holds only the fill value -- and
 the index's CRC-32C as a little-endian uint32. :class:`ShardEncoder` writes exactly the bytes
-Zarr writes for a whole shard (tests/test_dataset.py compares them), and Zarr reads the
+Zarr writes for a whole shard (tests/data/test_dataset.py compares them), and Zarr reads the
 files back as its own. Zarr's own write path costs about twice the compression on top
 (an async task per chunk, fill-value comparisons through full-size temporaries, a
 concatenated copy of the shard), which a dataset generator would pay for every byte.

@@ -13,7 +13,8 @@ convention, DESIGN.md section 2)::
     offset_v = +(cy + 0.5 - H / 2) p fx / fy            (film y grows upwards, rows downwards)
 
 These are the relations of ``UsdGeom.Camera.GetCamera().frustum``: a point seen by a USD
-camera with these values lands on the pixel OpenCV gives (``tests/test_usd.py`` projects an
+camera with these values lands on the pixel OpenCV gives (``tests/twin/test_usd.py``
+projects an
 off-axis point both ways); they match the paper code's ``-(cx - W/2) p`` and
 ``+(cy - H/2) p`` up to the half-pixel of the pixel-centre convention.
 
