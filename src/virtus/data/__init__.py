@@ -9,6 +9,8 @@ One concept per module:
 * :mod:`virtus.data.labels` -- the arrays of a sample, labels exact from the ground truth.
 * :mod:`virtus.data.store` -- the sharded Zarr v3 (or PNG) store and its manifest
   (:class:`DatasetStore`; layout in its docstring).
+* :mod:`virtus.data.integrity` -- what a store's description, records and samples must be
+  to be read (:class:`DamagedSample`: every read is checked against its checksum).
 * :mod:`virtus.data.generate` -- rendering missing shards here, in processes or on Ray
   (:func:`generate`), resumable after any interruption.
 * :mod:`virtus.data.loaders` -- :class:`FringeDataset` (PyTorch map-style; torch optional).
@@ -26,10 +28,12 @@ Example::
 from virtus.data.config import DatasetConfig, load_config
 from virtus.data.export import export_webdataset
 from virtus.data.generate import GenerateReport, generate
+from virtus.data.integrity import DamagedSample
 from virtus.data.loaders import FringeDataset
 from virtus.data.store import DatasetStore, VerifyReport
 
 __all__ = [
+    "DamagedSample",
     "DatasetConfig",
     "DatasetStore",
     "FringeDataset",

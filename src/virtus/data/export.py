@@ -6,21 +6,32 @@ checksum, rig, cam2world, sequence, sensor, objects), with ``key`` the zero-padd
 index -- the WebDataset convention (members sharing a key form one sample), readable by
 ``webdataset.WebDataset(urls).decode()`` or any tar reader. Tars are named
 ``<split>-000000.tar`` (``all-...`` without a split), hold ``samples_per_tar`` samples
-each, are written atomically and byte-reproducibly (fixed member order, times and owners).
+each and are byte-reproducible (fixed member order, times and owners).
+
+Every sample is checked against its recorded checksum as it is read
+(:meth:`~virtus.data.store.DatasetStore.read_sample`). A damaged sample stops the export
+with :class:`~virtus.data.store.DamagedSample` naming it, and nothing is written: the tars
+are made in a staging folder inside ``out_dir`` and moved into place only when all are
+complete. With ``on_damaged`` a damaged sample is reported and left out instead.
 """
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
+import os
+import shutil
 import tarfile
+import tempfile
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from virtus.data.store import DatasetStore
+from virtus.data.store import DamagedSample, DatasetStore
 from virtus.errors import InputError
-from virtus.io.runs import atomic_write
 
 __all__ = ["MAX_SAMPLES_PER_TAR", "export_webdataset"]
 
@@ -42,6 +53,33 @@ def _npy(array: np.ndarray) -> bytes:
     return buffer.getvalue()
 
 
+def _readable(
+    store: DatasetStore,
+    samples: dict[int, dict[str, Any]],
+    names: tuple[str, ...],
+    on_damaged: Callable[[int, str], None] | None,
+) -> Iterator[tuple[int, dict[str, np.ndarray]]]:
+    """``(index, arrays)`` of every sample that reads back intact, in index order."""
+    for index, meta in samples.items():
+        try:
+            data = store.read_sample(index, names, checksum=meta["checksum"])
+        except DamagedSample as error:
+            if on_damaged is None:
+                raise
+            on_damaged(index, error.problem)
+            continue
+        yield index, data
+
+
+def _new_folders(folder: Path) -> list[Path]:
+    """The folders that creating ``folder`` makes, deepest first."""
+    made = []
+    while not folder.exists() and folder != folder.parent:
+        made.append(folder)
+        folder = folder.parent
+    return made
+
+
 def export_webdataset(
     store_path: str | Path,
     out_dir: str | Path,
@@ -49,6 +87,7 @@ def export_webdataset(
     split: str | None = None,
     samples_per_tar: int = 64,
     arrays: tuple[str, ...] | None = None,
+    on_damaged: Callable[[int, str], None] | None = None,
 ) -> list[Path]:
     """Write the store's complete samples (of ``split``, or all) as WebDataset tars.
 
@@ -59,10 +98,20 @@ def export_webdataset(
     split : only this split's samples.
     samples_per_tar : samples per tar, 1..:data:`MAX_SAMPLES_PER_TAR`.
     arrays : array names to export (default: all).
+    on_damaged : called with ``(index, problem)`` for each damaged sample, which is then
+        left out (the tars hold ``samples_per_tar`` intact samples each); None: a damaged
+        sample raises.
 
     Returns
     -------
     The tar paths, in order.
+
+    Raises
+    ------
+    DamagedSample : a sample cannot be read or does not match its checksum (without
+        ``on_damaged``); no tar is written.
+    InputError, RunConflict : a bad argument, a store whose description or manifest is not
+        its own (:meth:`~virtus.data.store.DatasetStore.records`).
     """
     if (
         isinstance(samples_per_tar, bool)
@@ -73,30 +122,47 @@ def export_webdataset(
             "samples_per_tar", f"an integer in 1..{MAX_SAMPLES_PER_TAR}", samples_per_tar
         )
     store = DatasetStore.open(store_path)
-    names = tuple(a.name for a in store.layout) if arrays is None else tuple(arrays)
+    known = [a.name for a in store.layout]
+    names = tuple(known) if arrays is None else tuple(arrays)
+    if not names or any(name not in known for name in names):
+        raise InputError("arrays", f"names among {known}", list(names))
     samples = store.samples()
     if split is not None:
         configured = list(store.description["config"]["splits"])
         if split not in configured:
             raise InputError("split", f"one of {configured}", split)
         samples = {i: m for i, m in samples.items() if m["split"] == split}
-    indices = list(samples)
     out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise InputError("webdataset", "a folder for the tars", f"a file {out}")
+    made = _new_folders(out)
     out.mkdir(parents=True, exist_ok=True)
-    written = []
-    for number, first in enumerate(range(0, len(indices), samples_per_tar)):
-        chunk = indices[first : first + samples_per_tar]
-        path = out / f"{split or 'all'}-{number:06d}.tar"
-
-        def write(tmp: Path, chunk: list[int] = chunk) -> None:
-            with tarfile.open(tmp, "w", format=tarfile.USTAR_FORMAT) as tar:
-                for index in chunk:
+    staging = Path(tempfile.mkdtemp(prefix=".virtus-export-", dir=out))
+    written: list[str] = []
+    try:
+        stream = _readable(store, samples, names, on_damaged)
+        pending = next(stream, None)
+        while pending is not None:
+            name = f"{split or 'all'}-{len(written):06d}.tar"
+            with tarfile.open(staging / name, "w", format=tarfile.USTAR_FORMAT) as tar:
+                for _ in range(samples_per_tar):
+                    if pending is None:
+                        break
+                    index, data = pending
                     key = f"{index:06d}"
-                    data = store.read_sample(index, names)
-                    for name in names:
-                        _member(tar, f"{key}.{name}.npy", _npy(data[name]))
+                    for array in names:
+                        _member(tar, f"{key}.{array}.npy", _npy(data[array]))
                     meta = json.dumps(samples[index], separators=(",", ":")).encode()
                     _member(tar, f"{key}.json", meta)
-
-        written.append(atomic_write(path, write))
-    return written
+                    pending = next(stream, None)
+            written.append(name)
+        for name in written:
+            os.replace(staging / name, out / name)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        for folder in made:  # what this call created, if nothing else is there
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        raise
+    shutil.rmtree(staging, ignore_errors=True)
+    return [out / name for name in written]

@@ -4,9 +4,11 @@
 
 1. Everything that can be refused is checked before any rendering: the configuration
    (:mod:`virtus.data.config`), the candidate sequences, sensors, projectors and object
-   instances (:class:`~virtus.data.sampling.Randomiser`), the output folder (writable; empty,
-   new, or a store of the same configuration) and the sizes (samples, workers, shard
-   memory).
+   instances (:class:`~virtus.data.sampling.Randomiser`), the mesh files against their
+   headers (:mod:`virtus.scene.meshfiles`), the output folder (writable; empty, new, or a
+   store of the same configuration whose description and records are its own) and the
+   sizes (samples, workers, shard memory). A Ray cluster is connected to before the
+   store is touched, within ``ray_timeout`` seconds (:func:`connect_ray`).
 2. Under the output folder's lock (:func:`virtus.io.runs.directory_lock`: one generating
    process at a time), the store is created or extended (:meth:`DatasetStore.prepare`) and
    its manifest says which shards are missing.
@@ -30,7 +32,10 @@ shards without a record; the store ends byte for byte as an uninterrupted run le
 from __future__ import annotations
 
 import functools
+import logging
 import os
+import socket
+import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
@@ -48,8 +53,10 @@ from virtus.errors import InputError
 from virtus.io.runs import directory_lock, file_digest
 
 __all__ = [
+    "RAY_TIMEOUT_S",
     "TIMING_KEYS",
     "GenerateReport",
+    "connect_ray",
     "generate",
     "input_digests",
     "render_shard",
@@ -80,6 +87,11 @@ _IN_WORKER = False
 #: suite checks the device path on the CPU's LLVM variant).
 LABELS_ON_DEVICE: bool | None = None
 _WORKER_BUFFER: tuple[tuple[str, str], dict[str, np.ndarray]] | None = None
+#: Seconds a Ray cluster address has to answer (``--ray-timeout``): Ray itself retries an
+#: unreachable address for minutes (20 attempts of ~40 s in Ray 2.x).
+RAY_TIMEOUT_S = 15.0
+#: Longest ``ray_timeout`` accepted, seconds.
+MAX_RAY_TIMEOUT_S = 3600.0
 
 
 @dataclass
@@ -490,18 +502,114 @@ def _run_local(
                     pending.add(pool.submit(render_shard, str(path), nxt, num, digest))
 
 
-def _run_ray(
-    path: Path, shards: list[int], num: int, digest: str, address: str, workers: int,
-    tick: Callable,
-) -> Iterator[dict[str, Any]]:  # fmt: skip
+def _ray_endpoint(address: str) -> tuple[str, int] | None:
+    """``(host, port)`` of a Ray cluster address (``host:port``, ``ray://host:port``);
+    None for ``"auto"`` and ``"local"``."""
+    if address in ("auto", "local"):
+        return None
+    host, colon, port = address.removeprefix("ray://").rpartition(":")
+    host = host.removeprefix("[").removesuffix("]")  # [IPv6]:port
+    if not colon or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise InputError("--ray", "'auto', 'local' or a cluster address host:port", address)
+    return host, int(port)
+
+
+def _within(seconds: float, name: str, work: Callable[[], Any]) -> Any:
+    """``work()`` on a daemon thread: its value or its exception, or :class:`TimeoutError`
+    when it has not returned after ``seconds`` (it is then left to finish on its own: a
+    connection attempt that Ray or the resolver cannot be told to abandon)."""
+    box: dict[str, Any] = {}
+
+    def run() -> None:
+        try:
+            box["value"] = work()
+        except BaseException as error:  # handed to the caller
+            box["error"] = error
+
+    thread = threading.Thread(target=run, name=name, daemon=True)
+    thread.start()
+    thread.join(seconds)
+    if thread.is_alive():
+        raise TimeoutError(f"no answer within {seconds:g} s")
+    if "error" in box:
+        raise box["error"]
+    return box.get("value")
+
+
+class _NotMainThread(logging.Filter):
+    """Drops Ray's warning that ``ray.init`` runs off the main thread (on purpose here)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return "not the main thread" not in record.getMessage()
+
+
+def connect_ray(address: str, timeout: float = RAY_TIMEOUT_S) -> Any:
+    """Connect this process to a Ray cluster, or give up after ``timeout`` seconds.
+
+    Parameters
+    ----------
+    address : ``"auto"`` (the running cluster), ``"local"`` (start one here) or a cluster
+        address ``host:port``; a Ray session already initialised in this process is used
+        as it is.
+    timeout : seconds the address has to accept a connection and Ray to connect to it.
+
+    Returns
+    -------
+    The ``ray`` module, initialised.
+
+    Raises
+    ------
+    InputError : Ray is not installed, the address is malformed, or no cluster answered
+        there in time (the address named, with the reason: refused, unknown host, no
+        answer).
+    """
     try:
         import ray
     except ImportError:
         raise InputError(
             "--ray", "Ray installed (pip install 'virtus-fpp[data]' or ray)", "no ray module"
         ) from None
-    if not ray.is_initialized():
-        ray.init(address=None if address == "local" else address, log_to_driver=False)
+    if ray.is_initialized():
+        return ray
+    endpoint = _ray_endpoint(address)
+    if address == "local":  # a cluster started here: nothing to wait for
+        ray.init(log_to_driver=False)
+        return ray
+    expected = f"the address of a running Ray cluster that answers within {timeout:g} s"
+    deadline = time.monotonic() + timeout
+    if endpoint is not None:  # refused, unknown or unreachable: known before Ray is asked
+
+        def probe() -> None:
+            socket.create_connection(endpoint, timeout=timeout).close()
+
+        try:
+            _within(timeout, "virtus-ray-probe", probe)
+        except OSError as error:  # TimeoutError included
+            reason = error.strerror or str(error) or type(error).__name__
+            raise InputError("--ray", expected, f"{address} ({reason})") from None
+    log = logging.getLogger("ray._private.worker")
+    quiet = _NotMainThread()
+    log.addFilter(quiet)
+    try:
+        _within(
+            max(deadline - time.monotonic(), 1.0), "virtus-ray-init",
+            functools.partial(ray.init, address=address, log_to_driver=False),
+        )  # fmt: skip
+    except TimeoutError:
+        raise InputError("--ray", expected, f"{address} (Ray did not connect in time)") from None
+    except Exception as error:  # Ray raises many types for a failed connection
+        reason = " ".join(str(error).split())[:160]
+        raise InputError("--ray", expected, f"{address} ({reason})") from None
+    finally:
+        log.removeFilter(quiet)
+    return ray
+
+
+def _run_ray(
+    path: Path, shards: list[int], num: int, digest: str, address: str, workers: int,
+    tick: Callable, timeout: float = RAY_TIMEOUT_S,
+) -> Iterator[dict[str, Any]]:  # fmt: skip
+    ray = connect_ray(address, timeout)
     task = ray.remote(num_cpus=1, max_retries=3)(render_shard)
     in_flight = max(2 * workers, 2 * int(ray.cluster_resources().get("CPU", 1)))
     queue: Iterable[int] = iter(shards)
@@ -517,6 +625,17 @@ def _run_ray(
             pending.append(task.remote(str(path), nxt, num, digest))
 
 
+def _check_mesh_files(config: DatasetConfig) -> None:
+    """Refuse a truncated or malformed mesh file of a ``mesh_folder`` source, naming it,
+    before anything is written (:func:`virtus.scene.meshfiles.check_mesh_file`)."""
+    from virtus.scene.meshfiles import check_mesh_file
+
+    for source in config.sources:
+        if source.type == "mesh_folder":
+            for name in source.files:
+                check_mesh_file(source.path / name)  # type: ignore[operator]
+
+
 def generate(
     config: DatasetConfig,
     out: str | Path,
@@ -526,6 +645,7 @@ def generate(
     ray: str | None = None,
     storage: str = "zarr",
     progress: Progress | None = None,
+    ray_timeout: float = RAY_TIMEOUT_S,
 ) -> GenerateReport:
     """Generate (or complete) a dataset store.
 
@@ -542,12 +662,16 @@ def generate(
         or a cluster address; a Ray session already initialised in this process is used.
     storage : ``"zarr"`` (sharded Zarr v3) or ``"png"`` (per-sample folders).
     progress : called with (complete, target, rendered by this call) as samples finish.
+    ray_timeout : seconds a Ray cluster address has to answer (:func:`connect_ray`),
+        at most :data:`MAX_RAY_TIMEOUT_S`.
 
     Raises
     ------
     InputError, VirtusError, OSError : bad configuration or sizes, an output folder that
-        is not writable, not empty or a store of another configuration -- all before any
-        sample is rendered.
+        is not writable, not empty or a store of another configuration (or with records of
+        another dataset, or an edited ``dataset.json``), a truncated mesh file, a Ray
+        address where no cluster answers in time -- all before any sample is rendered and
+        before the store is written to (its lock file aside).
     """
     config = config.with_num_samples(num)
     if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= MAX_WORKERS:
@@ -567,6 +691,15 @@ def generate(
         )
     if out.exists() and not out.is_dir():
         raise InputError("--out", "a folder (new, empty, or a dataset store)", f"a file {out}")
+    _check_mesh_files(config)
+    if ray is not None:
+        if (
+            isinstance(ray_timeout, bool)
+            or not isinstance(ray_timeout, int | float)
+            or not 0 < ray_timeout <= MAX_RAY_TIMEOUT_S
+        ):
+            raise InputError("ray_timeout", f"seconds in (0, {MAX_RAY_TIMEOUT_S:g}]", ray_timeout)
+        connect_ray(ray, float(ray_timeout))  # before the store is touched
     with directory_lock(out):
         store = DatasetStore.prepare(
             out,
@@ -597,7 +730,9 @@ def generate(
             pipelined = 2 * shard_bytes <= MAX_SHARD_BYTES
             results = _run_local(out, todo, target, store.digest, workers, tick, pipelined)
         else:
-            results = _run_ray(out, todo, target, store.digest, ray, workers, tick)
+            results = _run_ray(
+                out, todo, target, store.digest, ray, workers, tick, float(ray_timeout)
+            )
         for result in results:
             for stage, seconds in result["timing_s"].items():
                 timing[stage] += seconds

@@ -451,13 +451,22 @@ def checksum_mismatches(
     """The arrays of a sample that do not match its recorded checksum: names (CRC-32C
     checksums are per array), ``["sample"]`` when an old SHA-256 checksum of the whole
     sample differs or the record is not a checksum of this layout, ``[]`` when it
-    matches."""
+    matches.
+
+    ``arrays`` may hold only some of the layout's arrays when the checksum is CRC-32C (one
+    per array: those given are checked); a SHA-256 checksum needs them all."""
     if isinstance(recorded, str) and recorded.startswith(_SHA256_PREFIX):
+        if any(a.name not in arrays for a in layout):
+            return ["sample"]
         return [] if _sha256_checksum(arrays, layout) == recorded else ["sample"]
     if not isinstance(recorded, str) or not recorded.startswith(CRC32C_PREFIX):
         return ["sample"]
     expected = recorded.removeprefix(CRC32C_PREFIX).split(".")
     if len(expected) != len(layout):
         return ["sample"]
-    actual = sample_checksum(arrays, layout).removeprefix(CRC32C_PREFIX).split(".")
-    return [a.name for a, x, y in zip(layout, expected, actual, strict=True) if x != y]
+    given = [(a, x) for a, x in zip(layout, expected, strict=True) if a.name in arrays]
+    if not given:
+        return []
+    subset = tuple(a for a, _ in given)
+    actual = sample_checksum(arrays, subset).removeprefix(CRC32C_PREFIX).split(".")
+    return [a.name for (a, x), y in zip(given, actual, strict=True) if x != y]

@@ -9,6 +9,10 @@ sequence; the rest of the frame axis is zero padding). Everything else about the
 -- its rig, ``cam2world``, sequence, sensor, objects -- is in :meth:`FringeDataset.meta`,
 with :meth:`FringeDataset.rig` and :meth:`FringeDataset.sequence` as objects.
 
+Every item is checked against its sample's recorded checksum as it is read: a damaged
+sample (a shard file that no longer decompresses, or data that changed) raises
+:class:`~virtus.data.store.DamagedSample`, one line naming the store and the sample.
+
 PyTorch is optional: ``FringeDataset(..., tensors=False)`` returns numpy arrays and never
 imports it; with ``tensors=True`` (the default) a missing torch raises a
 :class:`~virtus.errors.VirtusError` that says how to install it. The dataset is
@@ -98,11 +102,19 @@ class FringeDataset:
 
     def __getitem__(self, item: int) -> dict[str, Any]:
         """The arrays of the ``item``-th sample (tensors or numpy arrays), plus ``index`` and
-        ``n_frames``."""
+        ``n_frames``.
+
+        Raises
+        ------
+        DamagedSample : the sample's data cannot be read or does not match its checksum
+            (:meth:`~virtus.data.store.DatasetStore.read_sample`: every read is checked).
+        """
         index = self._position(item)
         if self._store is None:  # unpickled in a DataLoader worker
             self._store = DatasetStore.open(self.path)
-        data: dict[str, Any] = self._store.read_sample(index, self.arrays)
+        data: dict[str, Any] = self._store.read_sample(
+            index, self.arrays, checksum=self._meta[index]["checksum"]
+        )
         if self.tensors:
             torch = require_torch()
             data = {name: torch.from_numpy(value) for name, value in data.items()}

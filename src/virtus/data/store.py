@@ -26,7 +26,9 @@ Layout of a store directory ``STORE`` (format :data:`STORE_FORMAT`)::
     frames, 8- or 16-bit PNG) and STORE/samples/000123/<name>.npy for every label.
 
 **Completeness.** A sample exists when, and only when, the record of its shard lists it
-and the record carries this store's dataset digest. A writer owns whole shards: it
+and the record carries this store's dataset digest; a record that does not (copied from
+another store, or beside an edited ``dataset.json``) is refused, named, by every reader
+(:mod:`virtus.data.integrity`). A writer owns whole shards: it
 renders all the shard's samples, writes each array's shard file at once (written beside
 its place and renamed over it, :mod:`virtus.data.shards`; a PNG sample folder is renamed
 into place), then writes the record. A process killed at any moment leaves either a
@@ -34,8 +36,9 @@ complete, recorded shard or one without a record, which the next run writes agai
 same bytes (samples are deterministic), so nothing is duplicated or half-written.
 
 **Checksums.** Each sample's checksum (:func:`virtus.data.labels.sample_checksum`: a CRC-32C
-per array) covers its arrays as stored; :meth:`DatasetStore.verify` reads every sample back,
-compares, and names the arrays that differ.
+per array) covers its arrays as stored; :meth:`DatasetStore.read_sample` checks it on every
+read (:class:`~virtus.data.integrity.DamagedSample`), :meth:`DatasetStore.verify` reads
+every sample back, compares, and names the arrays that differ.
 """
 
 from __future__ import annotations
@@ -55,10 +58,17 @@ import numpy as np
 
 from virtus import __version__
 from virtus.capture.capture import UNITS as CAPTURE_UNITS
-from virtus.data.labels import ArraySpec, checksum_mismatches, sample_checksum
+from virtus.data.integrity import (
+    DamagedSample,
+    check_arrays,
+    check_description,
+    describe,
+    record_problem,
+)
+from virtus.data.labels import CRC32C_PREFIX, ArraySpec, checksum_mismatches, sample_checksum
 from virtus.data.shards import ShardEncoder
 from virtus.errors import InputError, RunConflict
-from virtus.io.runs import config_digest, first_difference, write_json_atomic
+from virtus.io.runs import canonical, config_digest, first_difference, write_json_atomic
 from virtus.io.safeio import read_json
 
 __all__ = [
@@ -67,6 +77,7 @@ __all__ = [
     "SHARD_FORMAT",
     "STORAGES",
     "STORE_FORMAT",
+    "DamagedSample",
     "DatasetStore",
     "EncodedSample",
     "VerifyReport",
@@ -210,6 +221,7 @@ class DatasetStore:
         self._arrays: dict[str, Any] = {}
         self._encoders: dict[str, ShardEncoder | None] = {}
         self._pid = self._encoders_pid = os.getpid()
+        self._checksums: dict[int, Any] = {}  # sample -> recorded checksum (read_sample)
 
     # -- opening --------------------------------------------------------------------------
 
@@ -219,7 +231,10 @@ class DatasetStore:
 
         Raises
         ------
-        InputError : ``path`` holds no ``dataset.json`` or one of another format.
+        InputError : ``path`` holds no ``dataset.json``, one of another format or a
+            malformed one.
+        RunConflict : a ``dataset.json`` edited since it was written (its identity digest
+            or configuration disagree with its identity).
         """
         path = Path(path)
         file = path / DESCRIPTION_FILE
@@ -230,6 +245,7 @@ class DatasetStore:
         data = read_json(file, "dataset description", expect=dict)
         if data.get("format") != STORE_FORMAT:
             raise InputError(f"{file} format", STORE_FORMAT, data.get("format"))
+        check_description(file, data, STORAGES)
         return cls(path, data)
 
     @classmethod
@@ -270,6 +286,16 @@ class DatasetStore:
                     f"{path} holds a dataset made with another configuration ({where}); "
                     "choose another --out or remove it"
                 )
+            where = first_difference(
+                canonical([a.to_dict() for a in layout]), store.description["layout"]
+            )
+            if where is not None:
+                raise RunConflict(
+                    f"{file}: its layout differs from this configuration's "
+                    f"(layout{where.split(': ', 1)[0]}); the file was edited: restore it, or "
+                    "generate into a new store"
+                )
+            store.records()  # every record is this dataset's (else the file is named)
         elif path.exists() and any(p.name not in _IGNORED for p in path.iterdir()):
             raise RunConflict(
                 f"{path} exists and is not a virtus dataset (no {DESCRIPTION_FILE}); choose a "
@@ -323,18 +349,43 @@ class DatasetStore:
         return self.path / MANIFEST_DIR / f"shard_{shard:06d}.json"
 
     def records(self) -> dict[int, dict[str, Any]]:
-        """Shard -> record, for every record of this dataset (others are ignored)."""
-        out = {}
+        """Shard -> record, for every record of the manifest.
+
+        Raises
+        ------
+        RunConflict : a file of the manifest that is not a record of this dataset (another
+            dataset's digest -- copied from another store, or this ``dataset.json`` was
+            edited --, another shard's number, samples outside its shard, unreadable): the
+            first one is named. Records are written atomically, so none of these comes
+            from an interrupted run; removing the file makes ``dataset generate`` render
+            its shard again.
+        """
+        out: dict[int, dict[str, Any]] = {}
         folder = self.path / MANIFEST_DIR
         if not folder.is_dir():
             return out
+        rejected = []
         for file in sorted(folder.glob("shard_*.json")):
             try:
                 record = read_json(file, "shard record", expect=dict, max_bytes=_MAX_RECORD_BYTES)
-            except InputError:
-                continue  # never happens with atomic writes; verify reports the gap
-            if record.get("format") == SHARD_FORMAT and record.get("dataset") == self.digest:
-                out[int(record["shard"])] = record
+            except InputError as error:
+                rejected.append((file, f"unreadable ({error})"))
+                continue
+            problem = record_problem(
+                file, record, shard_format=SHARD_FORMAT, digest=self.digest,
+                shard_samples=self.shard_samples,
+            )  # fmt: skip
+            if problem is None:
+                out[record["shard"]] = record
+            else:
+                rejected.append((file, problem))
+        if rejected:
+            file, problem = rejected[0]
+            more = f" ({len(rejected) - 1} more such files)" if len(rejected) > 1 else ""
+            raise RunConflict(
+                f"{file}: not a shard record of this dataset: {problem}{more}; remove it "
+                "(dataset generate renders its shard again)"
+            )
         return out
 
     def samples(self) -> dict[int, dict[str, Any]]:
@@ -483,29 +534,90 @@ class DatasetStore:
     # -- reading --------------------------------------------------------------------------
 
     def read_sample(
-        self, index: int, names: tuple[str, ...] | None = None
+        self,
+        index: int,
+        names: tuple[str, ...] | None = None,
+        *,
+        verify: bool = True,
+        checksum: str | None = None,
     ) -> dict[str, np.ndarray]:
-        """The arrays of sample ``index`` (all, or ``names``), as stored."""
+        """The arrays of sample ``index`` (all, or ``names``), as stored, checked against the
+        checksum of its record.
+
+        Parameters
+        ----------
+        index : a complete sample (one its shard's record lists).
+        names : the arrays to read (default: all). With a CRC-32C checksum (one per array)
+            only these are read and checked; an old SHA-256 checksum covers the whole sample,
+            which is then read.
+        verify : compare the checksum (False: read as stored, unchecked).
+        checksum : the sample's recorded checksum, if the caller holds its record (else it
+            is looked up in the manifest).
+
+        Raises
+        ------
+        InputError : ``index`` is not a complete sample, ``names`` holds an unknown name.
+        DamagedSample : the data cannot be read (a decompression error, a truncated or
+            missing file) or does not match the checksum; the sample and the arrays named.
+        """
         wanted = [a for a in self.layout if names is None or a.name in names]
         if names is not None and len(wanted) != len(set(names)):
             known = [a.name for a in self.layout]
             raise InputError("names", f"array names among {known}", list(names))
-        if self.storage == "zarr":
-            arrays = self._zarr_arrays()
-            return {a.name: np.asarray(arrays[a.name][index]) for a in wanted}
-        return {a.name: self._png_read(index, a) for a in wanted}
+        if isinstance(index, bool) or not isinstance(index, int | np.integer):
+            raise InputError("index", "a sample index (an integer)", index)
+        index = int(index)
+        if verify:
+            recorded = self._recorded_checksum(index) if checksum is None else checksum
+            if not str(recorded).startswith(CRC32C_PREFIX):
+                wanted = list(self.layout)  # a whole-sample checksum: read every array
+        elif not 0 <= index < self.num_samples:
+            raise InputError("index", f"a sample index in 0..{self.num_samples - 1}", index)
+        arrays = self._zarr_arrays() if self.storage == "zarr" else {}
+        data = {}
+        for spec in wanted:
+            try:
+                if self.storage == "zarr":
+                    data[spec.name] = np.asarray(arrays[spec.name][index])
+                else:
+                    data[spec.name] = self._png_read(index, spec)
+            except Exception as error:  # zarr, numcodecs, Blosc and images raise many types
+                raise DamagedSample(
+                    self.path, index, f"{spec.name} unreadable ({describe(error)})"
+                ) from None
+        if verify:
+            wrong = checksum_mismatches(data, self.layout, recorded)
+            if wrong:
+                raise DamagedSample(self.path, index, f"checksum mismatch ({', '.join(wrong)})")
+        if names is not None:
+            data = {a.name: data[a.name] for a in self.layout if a.name in names}
+        return data
+
+    def _recorded_checksum(self, index: int) -> Any:
+        """The checksum sample ``index``'s record holds (the manifest is read once, and again
+        for a sample recorded since)."""
+        if index not in self._checksums:
+            self._checksums = {i: m["checksum"] for i, m in self.samples().items()}
+        if index not in self._checksums:
+            raise InputError(
+                "index",
+                f"a complete sample of {self.path} ({len(self._checksums)} recorded)",
+                index,
+            )
+        return self._checksums[index]
 
     def _read_block(self, start: int, stop: int) -> dict[str, np.ndarray]:
         """Every array of samples ``[start, stop)``, stacked (as stored)."""
         if self.storage == "zarr":
             arrays = self._zarr_arrays()
             return {a.name: np.asarray(arrays[a.name][start:stop]) for a in self.layout}
-        samples = [self.read_sample(index) for index in range(start, stop)]
+        samples = [self.read_sample(index, verify=False) for index in range(start, stop)]
         return {a.name: np.stack([s[a.name] for s in samples]) for a in self.layout}
 
     def verify(self, progress: Callable[[int, int], None] | None = None) -> VerifyReport:
         """Read every recorded sample back and compare its checksum; list missing samples
-        of ``[0, num_samples)`` and leftover temporary files."""
+        of ``[0, num_samples)`` and leftover temporary files (a manifest file that is not
+        this dataset's record raises :class:`RunConflict`, :meth:`records`)."""
         report = VerifyReport()
         records = self.records()
         samples = self.samples()
@@ -610,8 +722,16 @@ class DatasetStore:
         import zarr
 
         if not self._arrays or self._pid != os.getpid():
-            group = zarr.open_group(self.path, mode="r+")
-            self._arrays = {spec.name: group[spec.name] for spec in self.layout}
+            try:
+                group = zarr.open_group(self.path, mode="r+")
+                opened = {spec.name: group[spec.name] for spec in self.layout}
+            except Exception as error:  # zarr raises many types for missing or bad metadata
+                raise InputError(
+                    f"store {self.path}", "Zarr arrays for the layout of its dataset.json",
+                    describe(error),
+                ) from None  # fmt: skip
+            check_arrays(self.path, self.layout, opened)
+            self._arrays = opened
             self._pid = os.getpid()
         return self._arrays
 
@@ -623,9 +743,10 @@ class DatasetStore:
     def _png_write(self, index: int, arrays: dict[str, np.ndarray], n_frames: int) -> None:
         """Write a sample folder beside its place, then rename it into place."""
         from virtus.io.images import write_frames
+        from virtus.io.safewrite import check_directory
 
-        target = self._sample_dir(index)
-        staging = target.parent / f".tmp-{target.name}"
+        target = check_directory(self._sample_dir(index), "sample folder")
+        staging = check_directory(target.parent / f".tmp-{target.name}", "staging folder")
         shutil.rmtree(staging, ignore_errors=True)
         staging.mkdir(parents=True)
         write_frames(staging / "frames", arrays["frames"][:n_frames], workers=1)

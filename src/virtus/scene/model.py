@@ -20,8 +20,9 @@ it into a Mitsuba scene. Conventions:
 Bounds (each refusal is an :class:`~virtus.errors.InputError` naming the key or file):
 every number finite; lengths (radii, sizes, centres, translations, mesh vertices in the
 world) within :data:`MAX_LENGTH_M`; the YAML file read through :mod:`virtus.io.safeio`
-(size, UTF-8, aliases, depth); mesh files at most :data:`MAX_MESH_BYTES`, with finite
-vertices, valid face indices, no degenerate (zero-area) faces; textures at most
+(size, UTF-8, aliases, depth); mesh files at most :data:`MAX_MESH_BYTES`, of the size
+their header says (a truncated STL or PLY is refused: :mod:`virtus.scene.meshfiles`), with
+finite vertices, valid face indices, no degenerate (zero-area) faces; textures at most
 :data:`MAX_TEXTURE_BYTES`.
 
 YAML example (unknown keys are rejected with an error naming the key)::
@@ -70,6 +71,7 @@ from pydantic import (
 from virtus.errors import InputError, VirtusError
 from virtus.geometry.transforms import Pose
 from virtus.io.safeio import check_file, load_npy, read_yaml
+from virtus.scene.meshfiles import check_mesh_file, load_mesh_file
 
 #: Largest length or coordinate a scene may hold, metres (1 km). Bench FPP scenes span
 #: metres; Mitsuba traces in float32, whose spacing at 1 km is already 0.06 mm, so larger
@@ -146,6 +148,9 @@ def _error_from_validation(error: ValidationError, prefix: str) -> InputError:
     if isinstance(cause, InputError):
         # Our own validators (and nested models) already phrased "expected ..., got ...";
         # keep their words and join the key paths without repeating a part.
+        if parts and cause.name.startswith(f"{parts[-1]} "):  # "path <file>": kept whole
+            name = ".".join([prefix, *parts]) + cause.name.removeprefix(parts[-1])
+            return InputError(name, cause.expected, cause.got)
         inner = [part for part in cause.name.split(".") if part not in _LOC_NOISE]
         if parts and inner and parts[-1] == inner[0]:
             inner = inner[1:]
@@ -476,6 +481,10 @@ class MeshObject(_Posed):
             check_file(path, "mesh", max_bytes=MAX_MESH_BYTES, kind="mesh file")
         except InputError as error:  # too large: keep the key as the name, the path as got
             raise InputError("path", error.expected, f"{path} ({error.got})") from None
+        try:
+            check_mesh_file(path)  # its header against its size (a truncated file)
+        except InputError as error:  # the key, then the file in full (not cut as a got)
+            raise InputError(f"path {path}", error.expected, error.got) from None
         return path
 
     @field_serializer("path")
@@ -491,13 +500,8 @@ class MeshObject(_Posed):
         faces : (F, 3) int64 vertex indices.
         uv : (V, 2) float64 texture coordinates, or None when the file has none.
         """
-        import trimesh
-
         path = check_file(self.path, "mesh", max_bytes=MAX_MESH_BYTES, kind="mesh file")
-        try:
-            mesh = trimesh.load(path, force="mesh", process=False)
-        except Exception as error:  # trimesh raises many types for bad files
-            raise InputError(f"mesh {path}", "a readable triangle mesh", f"{error}") from None
+        mesh = load_mesh_file(path)  # checked against its header first (scene.meshfiles)
         vertices = np.asarray(getattr(mesh, "vertices", ()), dtype=np.float64).reshape(-1, 3)
         faces = np.asarray(getattr(mesh, "faces", ()), dtype=np.int64).reshape(-1, 3)
         uv = getattr(getattr(mesh, "visual", None), "uv", None)

@@ -43,6 +43,8 @@ written as PLY files (their float32 points unchanged, a uniform scale kept in
 
 from __future__ import annotations
 
+import contextlib
+import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -50,6 +52,7 @@ from typing import Any
 
 import numpy as np
 
+from virtus.checks import positive
 from virtus.errors import InputError, MissingDependency, VirtusError
 from virtus.geometry.devices import Camera, Projector, Rig
 from virtus.geometry.isaac import CV_TO_USD_CAMERA, intrinsics_from_isaac, usd_camera_params
@@ -64,6 +67,20 @@ from virtus.twin.parameters import (
     prim_transform,
     twin_parameters,
 )
+
+__all__ = [
+    "CAMERA",
+    "PROJECTOR",
+    "USD_MISSING",
+    "USD_SUFFIXES",
+    "UsdContents",
+    "export_usd",
+    "is_usd_path",
+    "load_usd_scene",
+    "read_usd",
+    "require_usd",
+    "usd_camera_intrinsics",
+]
 
 #: The one line printed when usd-core is missing.
 USD_MISSING = "USD support needs usd-core: pip install 'virtus-fpp[usd]'"
@@ -281,9 +298,9 @@ def _unit_square(stage: Any, path: str, uv: bool) -> Any:
 def _write_object(
     stage: Any, name: str, obj: Any, scene2world: Pose, mpu: float, assets: Path, role: str
 ) -> None:
-    import trimesh
     from pxr import Sdf, UsdGeom
 
+    from virtus.scene.meshfiles import load_mesh_file
     from virtus.scene.model import (
         BoxObject,
         MeshObject,
@@ -313,7 +330,7 @@ def _write_object(
                 file = _write_texture(assets / f"{name}.png", obj.texture)
                 texture = f"{assets.name}/{file.name}"
     elif isinstance(obj, MeshObject):
-        mesh = trimesh.load(obj.path, force="mesh", process=False)
+        mesh = load_mesh_file(obj.path)  # checked against its header (a truncated file)
         prim = UsdGeom.Mesh.Define(stage, path)
         points = np.asarray(mesh.vertices, dtype=np.float32)
         prim.CreatePointsAttr(points.tolist())
@@ -372,6 +389,13 @@ def export_usd(
     path = Path(path)
     if not is_usd_path(path):
         raise InputError("out", f"a USD file ({', '.join(USD_SUFFIXES)})", str(path))
+    meters_per_unit = positive("meters_per_unit", meters_per_unit)
+    if scene is not None:  # every mesh file is checked before anything is written
+        from virtus.scene.meshfiles import check_mesh_file
+
+        for obj in (*scene.objects, scene.background):
+            if getattr(obj, "type", None) == "mesh":
+                check_mesh_file(obj.path)
     path.parent.mkdir(parents=True, exist_ok=True)
     assets = path.parent / f"{path.stem}_assets"
     stage = Usd.Stage.CreateInMemory()
@@ -611,28 +635,74 @@ def _read_object(prim: Any, stage2scene: Pose, mpu: float, mesh_dir: Path) -> tu
     return MeshObject(file, (scale[0] if uniform else 1.0) * mpu, pose, Material(**keys)), role
 
 
+def _composition_problem(error: Any) -> tuple[str, str]:
+    """``(what, why)`` of a composition error (``Pcp.Error*``): ``("reference @asset@ of
+    </Prim>", "not found")``, or USD's own words for other kinds."""
+    text = " ".join(str(error).split()).removesuffix("; skipping.").rstrip(".")
+    found = re.match(r"Could not load sublayer (@[^@]*@) of layer (@[^@]*@)", text)
+    if found:
+        return f"sublayer {found[1]} of {found[2]}", "not found"
+    found = re.match(
+        r"(?:In <[^>]*>: )?Could not open asset (@[^@]*@) for (\w+) introduced by (.*)", text
+    )
+    if found:
+        prim = re.search(r"<[^>]*>$", found[3])
+        return f"{found[2]} {found[1]} of {prim[0] if prim else found[3]}", "not found"
+    return text, "a composition error"
+
+
+def _open_stage(path: Path) -> Any:
+    """The stage of ``path``, composed: every sublayer, reference and payload found.
+
+    Raises
+    ------
+    InputError : usd-core cannot open it, a composition error (the missing sublayer,
+        reference or payload named; USD's own warnings about it are not repeated), or a
+        ``metersPerUnit`` that is not a positive number.
+    """
+    from pxr import Tf, Usd, UsdGeom
+
+    trap = getattr(Tf, "DiagnosticTrap", None)
+    try:
+        with trap() if trap is not None else contextlib.nullcontext() as caught:
+            stage = Usd.Stage.Open(str(path))
+            errors = list(stage.GetCompositionErrors()) if stage is not None else []
+            if errors and caught is not None:
+                caught.Clear()  # one line below says it
+    except Exception as error:  # pxr raises Tf errors of its own types
+        raise InputError(f"stage {path}", "a USD stage usd-core can open", str(error)) from None
+    if stage is None:
+        raise InputError(f"stage {path}", "a USD stage usd-core can open", "nothing")
+    if errors:
+        what, why = _composition_problem(errors[0])
+        more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+        raise InputError(
+            f"stage {path}: {what}{more}", "every sublayer, reference and payload found", why
+        )
+    mpu = float(UsdGeom.GetStageMetersPerUnit(stage))
+    if not np.isfinite(mpu) or mpu <= 0:
+        raise InputError(f"stage {path} metersPerUnit", "a positive number of metres", mpu)
+    return stage
+
+
 def read_usd(path: str | Path) -> UsdContents:
     """Read a stage's camera, projector and objects (module docstring).
 
     Raises
     ------
     MissingDependency : usd-core missing.
-    InputError : not a stage, a sheared or mirrored transform, a camera without size.
+    InputError : not a stage, a missing sublayer, reference or payload, a ``metersPerUnit``
+        that is not positive, a sheared or mirrored transform, a camera without size.
     """
     require_usd()
-    from pxr import Usd, UsdGeom, UsdLux
+    from pxr import UsdGeom, UsdLux
 
     from virtus.scene.model import Scene
 
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(2, "no such USD stage", str(path))
-    try:
-        stage = Usd.Stage.Open(str(path))
-    except Exception as error:  # pxr raises Tf errors of its own types
-        raise InputError(f"stage {path}", "a USD stage usd-core can open", str(error)) from None
-    if stage is None:
-        raise InputError(f"stage {path}", "a USD stage usd-core can open", "nothing")
+    stage = _open_stage(path)
     mpu = float(UsdGeom.GetStageMetersPerUnit(stage))
     prims = list(stage.Traverse())
     cameras = [p for p in prims if p.IsA(UsdGeom.Camera)]
