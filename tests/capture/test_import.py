@@ -17,6 +17,8 @@ from virtus.calib.io import save_paper_txt
 from virtus.capture.capture import Capture, import_capture
 from virtus.cli import main
 from virtus.errors import InputError, VirtusError
+from virtus.geometry.devices import Projector, Rig
+from virtus.geometry.optics import Intrinsics
 from virtus.patterns import default_sequence, load_sequence_file
 from virtus.pipeline.scan import decode_capture, reconstruct_capture
 from virtus.scanner import Scanner
@@ -51,6 +53,14 @@ def _export(frames: np.ndarray, folder: Path, pattern: str) -> Path:
     for index, frame in enumerate(frames):
         assert cv2.imwrite(str(folder / pattern.format(index)), frame)
     return folder
+
+
+def _row_pair_rig(rig: Rig) -> Rig:
+    """``rig`` with its projector's 1140 DMD rows counted in pairs (912 x 570 px, each row
+    pair as tall as a column is wide), as the lab's sequence file describes them."""
+    k = rig.projector.intrinsics
+    pairs = Intrinsics(k.fx, k.fy / 2, k.cx, (k.height / 2 - 1) / 2, k.width, k.height // 2)
+    return Rig(rig.camera, Projector(pairs), rig.proj2cam)
 
 
 def _decoded_error(capture: Capture, decoded) -> np.ndarray:
@@ -124,7 +134,9 @@ def test_lab_sequence_decodes_and_a_wrong_description_is_flagged(tmp_path, capsy
     # The paper's pixel footprint on the object (a 160 px camera over the same field sees
     # ~4 camera px per fringe and blurs the codes over 5 projector px).
     scanner = Scanner(
-        rig=cropped_rig(320), sequence=sequence, projector=ProjectorModel(pixel=Lookup.bilinear)
+        rig=_row_pair_rig(cropped_rig(320)),
+        sequence=sequence,
+        projector=ProjectorModel(pixel=Lookup.bilinear),
     )
     rendered = scanner.capture(default_scene())
     folder = _export(rendered.frames, tmp_path / "lab", "{}.bmp")

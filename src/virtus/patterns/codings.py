@@ -12,7 +12,10 @@ Conventions
   ``phase_h``.
 * Pattern coordinate ``w = scale * u`` along each axis (``scale`` per direction, default 1;
   e.g. 2 on the rows of a diamond-pixel DMD whose rows are counted in pairs). Periods are in
-  pattern units; decoded ``proj_uv`` is in projector px.
+  pattern units; decoded ``proj_uv`` is in projector px. Projector px ``j`` shows the
+  pattern at ``w = scale j``: with scale 2, DMD row ``2j``, the first row of the pair
+  ``(2j, 2j + 1)`` that px ``j`` stands for, not the pair's centre ``2j + 0.5`` (a 0.25 px
+  difference; :mod:`virtus.patterns.files` says what that means for a real projector).
 * Absolute phase ``Phi = 2 pi w / T`` for a period ``T`` (any real ``T > 0``), so the phase
   origin is the centre of pixel 0 whatever ``T`` is.
 * Phase frame ``n`` of ``N`` (``n = 1..N``) shows ``f(Phi + offset + sign 2 pi n / N)`` with

@@ -12,9 +12,9 @@ Read by :func:`load_sequence_file` (``.yaml``, ``.yml``, ``.json``; at most 1 MB
 
     format: virtus.pattern_sequence   # optional; if present exactly this
     version: 2                        # optional; 1 or 2
-    width: 912                        # projector columns (px)
-    height: 1140                      # projector rows (px)
-    scale: {v: 1, h: 2}               # optional pattern units per projector px, per direction
+    width: 912                        # projector px along u_p (columns), as the rig has them
+    height: 1140                      # projector px along v_p (rows), as the rig has them
+    scale: {v: 1, h: 1}               # optional pattern units per projector px (below)
     description: free text            # optional
     blocks: [...]                     # compact form, or
     frames: [...]                     # the lossless per-frame form (what to_dict writes), or
@@ -22,14 +22,55 @@ Read by :func:`load_sequence_file` (``.yaml``, ``.yml``, ``.json``; at most 1 MB
     files: [000.png, ...]             # optional, one image per frame (importing captures)
     bit_depth: 8                      # optional; only 8
 
+``width`` and ``height`` are the projector's size in the rig's (calibrated) projector px,
+which is the size of every image ``virtus patterns`` writes; with ``scale`` they stay so.
+
 ``blocks`` (each expands into frames, in this order)::
 
     {kind: phase, direction: v, period: 18, steps: 18,        # or periods: [..] (one set each)
-     profile: sinusoidal, offset: 0.0, sign: 1}                # optional, these defaults
+     profile: sinusoidal, offset: 0.0, sign: 1,                # optional, these defaults
+     first_step: 1}         # 0: the frames are numbered 0..N-1 (below)
     {kind: gray, direction: v, period: 18, bits: 6,            # kind gray or binary
      bit_order: msb_first, align: centre, complement: false,   # optional, these defaults
      inverted: false}       # true: each bit (and complement) as a pair: frame, then inverse
     {kind: white, count: 1}                                    # white, black or ignore
+
+Values: ``profile`` ``sinusoidal``, ``binary`` or ``dithered``; ``sign`` ``1`` or ``-1``;
+``align`` ``centre`` or ``edge``; ``bit_order`` ``msb_first`` (the frames show bit 1, the
+most significant, first) or ``lsb_first`` (least significant first: a 6-bit code's frames
+show bits 6, 5, ..., 1); meanings in :mod:`virtus.patterns.codings`.
+
+Phase steps and offsets. Frame ``n`` of a phase set of ``N`` steps shows
+``f(Phi + offset + sign 2 pi n / N)``. ``first_step: 1`` (the default) numbers a block's
+frames ``n = 1..N``; ``first_step: 0`` numbers them ``n = 0..N-1``, as many labs do (their
+first frame has no shift; it is stored as step ``N``, the same image). ``offset`` is in
+radians; ``offset_steps: k`` gives it in steps instead (``offset = 2 pi k / N``, any real
+``k``; at most one of the two). Both are block keys: the per-frame form (``to_dict``,
+``sequence.json``) stores each frame's ``step`` in ``1..N`` and ``offset`` in radians.
+E.g. square-wave fringes of period 18 px shifted one pixel a frame, frame ``n = 0..17``
+lighting column ``x`` where ``(x + n) mod 18 < 9``::
+
+    {kind: phase, direction: v, period: 18, steps: 18, profile: binary,
+     first_step: 0, offset_steps: -4}
+
+Scaled axes (diamond-pixel DMDs). ``scale: {v: s_v, h: s_h}`` (each default 1) sets the
+pattern coordinate ``w = s u`` along each axis: periods and code stripes are in pattern
+units, decoded ``proj_uv`` in projector px (``w / s``). Projector px ``j`` (image row or
+column ``j``) shows the pattern at ``w = s j``, the centre of pattern unit ``s j``. A DLP
+LightCrafter 4500 has 1140 diamond-pixel rows at half the column pitch; calibrated with
+its rows counted in pairs it is a ``912 x 570`` px projector and its patterns are drawn on
+DMD rows: ``height: 570, scale: {h: 2}`` (a 1140 would describe 2280 DMD rows, and a
+code sized for 1140 rows is refused as too short). Row ``j`` then stands for the DMD row
+pair ``(2j, 2j + 1)`` and shows the value at DMD row ``2j``, the pair's first (even) row,
+not the pair's centre ``2j + 0.5``. ``virtus patterns`` writes ``height`` = 570 rows, row
+``j`` that value; the 1140-row image the projector takes repeats each row twice
+(``image.repeat(2, axis=0)``: DMD rows ``2j`` and ``2j + 1`` both show row ``j``), and
+the centre of pair ``j`` then decodes to ``v_p = j``, as virtus's projector model has it
+(each value is held over its pair, centred on ``2j + 0.5``). Patterns computed for every
+DMD row (DMD row ``r`` showing the value at ``w = r``) put pair ``j``'s centre at
+``w = 2j + 0.5``: they decode to ``v_p = j + 0.25``, a silent 0.25 px (about 0.3 mm at
+0.3 m) bias in a calibration that puts pair ``j`` at ``v_p = j``.
+``examples/sequences/lightcrafter_lab.yaml`` is such a description.
 
 A direction may have a code and no phase frames (a Gray-code-only or binary-only capture):
 it decodes to the centre of the code's stripe, the column (row) index for a code per
@@ -64,7 +105,6 @@ Examples: ``examples/sequences/*.yaml``.
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -72,9 +112,10 @@ from typing import Any
 
 import numpy as np
 
-from virtus.checks import positive_int
+from virtus.checks import finite, positive_int
 from virtus.errors import InputError, VirtusError
 from virtus.io.jsonio import write_json
+from virtus.io.safeio import parse_json, parse_yaml
 from virtus.patterns.codings import MAX_BITS, _choice
 from virtus.patterns.frames import (
     _CODE_KINDS,
@@ -115,7 +156,18 @@ _TOP_KEYS = (
 #: ``preset`` values.
 PRESETS = ("opencv_graycode",)
 _BLOCK_KEYS = {
-    "phase": ("kind", "direction", "period", "periods", "steps", "profile", "offset", "sign"),
+    "phase": (
+        "kind",
+        "direction",
+        "period",
+        "periods",
+        "steps",
+        "first_step",
+        "profile",
+        "offset",
+        "offset_steps",
+        "sign",
+    ),
     "code": (
         "kind",
         "direction",
@@ -251,6 +303,8 @@ def _expand_blocks(blocks: Any, data: Mapping[str, Any]) -> tuple[Frame, ...]:
         if not isinstance(block, Mapping) or "kind" not in block:
             raise InputError(name, "a mapping with a 'kind' key", block)
         kind = block["kind"]
+        if not isinstance(kind, str):
+            kind = None  # refused below, not looked up (a list or mapping is unhashable)
         if kind == "phase":
             frames += _phase_block(name, block, len(frames))
         elif kind in _CODE_KINDS:
@@ -261,7 +315,7 @@ def _expand_blocks(blocks: Any, data: Mapping[str, Any]) -> tuple[Frame, ...]:
             frames += [Frame(kind)] * count
         else:
             kinds = ("phase", *_CODE_KINDS, *_UNIFORM_KINDS)
-            raise InputError(f"{name}.kind", f"one of {kinds}", kind)
+            raise InputError(f"{name}.kind", f"one of {kinds}", block["kind"])
     return tuple(frames)
 
 
@@ -275,10 +329,22 @@ def _phase_block(name: str, block: Mapping[str, Any], total: int) -> list[Frame]
     steps = positive_int(f"{name}.steps", block.get("steps"), minimum=3)
     _count(f"{name}.steps", steps * len(periods), total)
     extra = {k: block[k] for k in ("profile", "offset", "sign") if k in block}
+    if "offset_steps" in block:  # the offset in steps of this block: 2 pi k / N rad
+        if "offset" in block:
+            raise InputError(name, "at most one of 'offset' and 'offset_steps'", sorted(block))
+        extra["offset"] = (
+            2.0 * np.pi * finite(f"{name}.offset_steps", block["offset_steps"]) / steps
+        )
+    first = block.get("first_step", 1)
+    if isinstance(first, bool) or not isinstance(first, int | np.integer) or first not in (0, 1):
+        raise InputError(f"{name}.first_step", "0 or 1", first)
+    # Frame n (first..first + N - 1) shifts by 2 pi n / N: step 0 is step N (a 2 pi shift).
     return [
-        Frame("phase", block.get("direction"), period, step=n, steps=steps, **extra)
+        Frame(
+            "phase", block.get("direction"), period, step=(n - 1) % steps + 1, steps=steps, **extra
+        )
         for period in periods
-        for n in range(1, steps + 1)
+        for n in range(first, first + steps)
     ]
 
 
@@ -343,6 +409,16 @@ def _files(data: Mapping[str, Any], count: int) -> list[str] | None:
         raise InputError("files", "a list of file names", files)
     if len(files) != count:
         raise InputError("files", f"{count} file names (one per frame)", len(files))
+    first: dict[str, int] = {}
+    for index, name in enumerate(files):
+        key = os.path.normcase(os.path.normpath(name))  # a.png, ./a.png, x/../a.png: one file
+        if key in first:
+            raise InputError(
+                "files",
+                "a different image for every frame",
+                f"{name!r} for frames {first[key]} and {index}",
+            )
+        first[key] = index
     return files
 
 
@@ -376,17 +452,11 @@ def load_sequence_file(path: str | os.PathLike[str]) -> tuple[PatternSequence, l
         text = file.read_bytes().decode("utf-8")
     except UnicodeDecodeError as error:
         raise InputError("path", "UTF-8 text", f"{file}: {error}") from None
+    # the guarded parsers: nesting depth bounded before parsing (no RecursionError), YAML
+    # aliases bounded, NaN/Infinity, overflowing numbers and duplicate keys refused
     if suffix == ".json":
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as error:
-            raise InputError("path", "valid JSON", f"{file}: {error}") from None
+        data = parse_json(text, f"sequence {file}")
     else:
-        import yaml
-
-        try:
-            data = yaml.safe_load(text)
-        except yaml.YAMLError as error:
-            raise InputError("path", "valid YAML", f"{file}: {error}") from None
+        data = parse_yaml(text, f"sequence {file}")
     sequence = PatternSequence.from_dict(data)
     return sequence, _files(data, len(sequence))
