@@ -218,3 +218,38 @@ def test_cli_capture_owns_its_directory(tmp_path, capsys) -> None:
     assert code == 2 and "with other settings (config.seed: 3 here, 0 in the existing" in stderr
     code, _, _ = run_cli([*argv, "--seed", "3", "--overwrite"], capsys)
     assert code == 0 and Capture.load(tmp_path / "o").seed == 3
+
+
+@pytest.mark.parametrize(
+    ("peak", "dtype", "bits"),
+    [
+        (0, np.uint8, 8),
+        (255, np.uint8, 8),
+        (0, np.uint16, 10),
+        (255, np.uint16, 10),
+        (1023, np.uint16, 10),
+        (1024, np.uint16, 12),
+        (4095, np.uint16, 12),
+        (4096, np.uint16, 16),
+        (65535, np.uint16, 16),
+    ],
+)
+def test_bit_depth_is_the_smallest_adc_that_holds_the_peak(peak, dtype, bits) -> None:
+    # 2**b - 1 is the largest number of a b-bit ADC: 1023 fits 10 bits, 1024 needs 12.
+    from virtus.capture.capture import bit_depth_of
+
+    frames = np.zeros((2, 3, 4), dtype=dtype)
+    frames[1, 2, 3] = peak
+    assert bit_depth_of(frames) == bits
+    assert (1 << bits) - 1 >= peak
+
+
+def test_a_12_bit_capture_peaking_at_1024_is_accepted_and_decodes() -> None:
+    sequence, rig = default_sequence(), small_rig(1 / 12)
+    frames = np.full((len(sequence), 80, 80), 300, dtype=np.uint16)
+    frames[sequence.index_of("white")] = 1024
+    capture = Capture(sequence=sequence, rig=rig, frame_data=frames)
+    assert capture.bit_depth == 12 and capture.full_scale == 4095
+    # Decoding against that full scale accepts the frames (a 10-bit full scale would not).
+    decoded = sequence.decode(capture.frames, full_scale=capture.full_scale)
+    assert decoded.mask.shape == (80, 80)

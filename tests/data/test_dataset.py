@@ -568,3 +568,30 @@ def test_ray_cluster_makes_the_same_store(tmp_path) -> None:
     finally:
         ray.shutdown()
     assert store_files(tmp_path / "ray") == store_files(tmp_path / "local")
+
+
+def test_a_record_of_another_dataset_does_not_count_as_complete(mixed, tmp_path) -> None:
+    # A manifest record whose dataset digest is not this store's (copied from another
+    # store) must not make its shard complete: refused outright, or at least not counted.
+    import shutil
+
+    from virtus.errors import RunConflict
+
+    copy = tmp_path / "store"
+    shutil.copytree(mixed, copy)
+    store = DatasetStore.open(copy)
+    assert store.missing_shards(12) == [] and len(store.samples()) == 12
+    record = copy / "manifest" / "shard_000001.json"
+    data = json.loads(record.read_text())
+    assert data["dataset"] == store.digest
+    data["dataset"] = hashlib.sha256(b"another dataset").hexdigest()
+    record.write_text(json.dumps(data))
+    store = DatasetStore.open(copy)
+    try:
+        missing = store.missing_shards(12)
+    except RunConflict as error:
+        assert "shard_000001.json" in str(error)
+    else:
+        assert 1 in missing
+        start, stop = store.shard_bounds(1, 12)
+        assert not set(range(start, stop)) & set(store.samples())

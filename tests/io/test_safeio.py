@@ -293,3 +293,66 @@ def test_npz_files_are_read_without_pickles_and_refused_in_one_line(tmp_path):
     for path in (pickled, garbage, zip_header, tmp_path / "missing.npz"):
         with pytest.raises(VirtusError, match=r"not a readable pose file"):
             load_npz(path, "pose file")
+
+
+# -- size bounds, at the byte ------------------------------------------------------------------
+
+
+def test_npy_one_byte_over_the_bound_is_refused(tmp_path: Path) -> None:
+    # The bound is in bytes: a file of exactly max_bytes is read, one byte more is refused
+    # (before reading), as is an array whose data alone exceeds it.
+    path = tmp_path / "a.npy"
+    np.save(path, np.arange(1000, dtype=np.uint8))
+    size = path.stat().st_size
+    assert size > 1000
+    assert safeio.load_npy(path, "gt", max_bytes=size).size == 1000
+    with pytest.raises(InputError, match=rf"at most {size - 1:,} bytes, got '{size:,} bytes'"):
+        safeio.load_npy(path, "gt", max_bytes=size - 1)
+    # The header's own check: data bytes against the bound, whatever the file check did.
+    from virtus.io.npyfile import read_npy_header
+
+    with open(path, "rb") as stream:
+        assert read_npy_header(stream, "gt", size=size, max_bytes=1000).nbytes == 1000
+    with open(path, "rb") as stream, pytest.raises(InputError, match="at most 999 bytes"):
+        read_npy_header(stream, "gt", size=size, max_bytes=999)
+
+
+def test_npz_one_byte_over_the_uncompressed_bound_is_refused(tmp_path: Path) -> None:
+    # 100 kB of zeros deflate to a few hundred bytes: the file is far below the bound, its
+    # declared uncompressed size is what counts.
+    path = tmp_path / "z.npz"
+    np.savez_compressed(path, zeros=np.zeros(100_000, np.uint8))
+    import zipfile
+
+    with zipfile.ZipFile(path) as archive:
+        declared = sum(info.file_size for info in archive.infolist())
+    assert path.stat().st_size < 2000 < declared
+    assert safeio.load_npz(path, "pose file", max_bytes=declared)["zeros"].size == 100_000
+    with pytest.raises(InputError, match="uncompressed bytes"):
+        safeio.load_npz(path, "pose file", max_bytes=declared - 1)
+
+
+def test_default_array_bound_holds_a_capture_and_no_more_than_a_few_gigabytes() -> None:
+    import inspect
+
+    # 52 frames of 4096 x 4096 uint16 (1.7 GB) must fit; a bound 1024 times too large would
+    # let a lying file allocate terabytes.
+    assert 52 * 4096 * 4096 * 2 <= safeio.MAX_ARRAY_BYTES <= 4 * 2**30
+    for function in (safeio.load_npy, safeio.load_npz):
+        default = inspect.signature(function).parameters["max_bytes"].default
+        assert default == safeio.MAX_ARRAY_BYTES, function.__name__
+
+
+def test_a_texture_just_over_its_bound_is_refused(tmp_path: Path, monkeypatch) -> None:
+    # The texture bound is read when a texture is loaded: patched small, a .npy texture one
+    # byte over it is refused, one at it is read.
+    from virtus.scene import model
+
+    path = tmp_path / "t.npy"
+    np.save(path, np.full((8, 8), 0.5))
+    size = path.stat().st_size
+    monkeypatch.setattr(model, "MAX_TEXTURE_BYTES", size)
+    assert model.load_texture(path).shape == (8, 8)
+    monkeypatch.setattr(model, "MAX_TEXTURE_BYTES", size - 1)
+    with pytest.raises(InputError, match="at most"):
+        model.load_texture(path)

@@ -424,7 +424,7 @@ def test_example_files_load() -> None:
     multi = load_sequence_file(f"{EXAMPLES}/multiwavelength.yaml")[0]
     assert multi.periods("h") == (18.0, 144.0, 1152.0) and len(multi) == 38
     lab = load_sequence_file(f"{EXAMPLES}/lightcrafter_lab.yaml")[0]
-    assert (lab.width, lab.height, len(lab)) == (912, 1140, 52)
+    assert (lab.width, lab.height, len(lab)) == (912, 570, 52)
     assert sum(f.kind == "black" for f in lab.frames) == 4
     h_code = [f for f in lab.frames if f.kind == "gray" and f.direction == "h"]
     assert [f.bit for f in h_code] == [5, 4, 3, 2, 1] and h_code[0].bits == 5
@@ -533,3 +533,72 @@ def test_summary_is_json_ready() -> None:
     assert json.loads(json.dumps(summary)) == summary
     assert summary["valid_fraction"] == 0.0 and summary["flagged_fraction"] is None
     assert set(summary["v"]["modulation"]) == {"p5", "p50", "p95"}
+
+
+# --- offset and sign against ground truth; the binary stripe's closed edges -------------
+
+
+def formula_frames(sequence: PatternSequence, u, v, a, b) -> np.ndarray:
+    """Camera images ``A + B * value`` whose phase frames follow the documented formula
+    ``0.5 + 0.5 cos(2 pi w / T + offset + sign 2 pi n / N)`` (built here, not by the code
+    under test); codes and uniform frames are the sequence's own values (tested above)."""
+    out = projected(sequence, u, v, a, b)
+    for index, frame in enumerate(sequence.frames):
+        if frame.kind != "phase":
+            continue
+        w = np.asarray(u if frame.direction == "v" else v)
+        offset = frame.offset or 0.0
+        sign = -1 if frame.sign == -1 else 1
+        x = TWO_PI * w / frame.period + offset + sign * TWO_PI * frame.step / frame.steps
+        out[index] = a + b * (0.5 + 0.5 * np.cos(x))
+    return out
+
+
+#: sign -1 with an offset (the order of the two matters), and each alone.
+OFFSET_SIGN = {
+    "offset-0.5-sign-minus": (18.0, 5, {"offset": 0.5, "sign": -1}),
+    "offset-0.7-sign-minus-period-17.3": (17.3, 7, {"offset": 0.7, "sign": -1}),
+    "offset-minus-2": (18.0, 4, {"offset": -2.0}),
+    "sign-minus": (18.0, 6, {"sign": -1}),
+}
+
+
+def offset_sign_sequence(name: str) -> PatternSequence:
+    period, steps, extra = OFFSET_SIGN[name]
+    blocks = phase_and_code(period, steps, {"complement": True}, phase_extra=extra)
+    return describe(blocks + [{"kind": "white"}, {"kind": "black"}])
+
+
+@pytest.mark.parametrize("name", sorted(OFFSET_SIGN))
+def test_offset_and_sign_decode_to_the_true_coordinates(name: str) -> None:
+    # Ground truth, not host vs device: applying the offset before the sign instead of
+    # after it moves every coordinate by 2 offset T / (2 pi) px (1.4 px for 0.5 rad at T
+    # = 18) and passes a comparison of two decoders that share the mistake.
+    sequence = offset_sign_sequence(name)
+    rng = np.random.default_rng(zlib.crc32(name.encode()))
+    u, v = sample_coordinates(rng, WIDTH, HEIGHT, [sequence.periods("v")[0]], 4000)
+    frames = np.rint(formula_frames(sequence, u, v, 25.0, 190.0)).astype(np.uint8)[:, None, :]
+    result = sequence.decode(frames, neighbour_check=False)
+    assert result.mask.all()
+    error = result.proj_uv[0] - np.stack([u, v], axis=-1)
+    assert np.max(np.abs(error)) < tol.DECODE_MAX_PX
+    assert np.all(np.sqrt(np.mean(error**2, axis=0)) < tol.DECODE_RMS_PX)
+    assert not result.flagged.any()
+
+
+@pytest.mark.parametrize("period", [4, 8, 12, 24, 36, 72])
+def test_binary_stripes_are_closed_p_over_2_plus_1_of_p_pixels_on(period: int) -> None:
+    # cos x >= 0 on [-pi/2, pi/2] closed: with P/4 a whole number of pixels both edges fall
+    # on pixel centres and are lit, so every period has P/2 + 1 lit pixels, symmetric about
+    # the stripe's centre (open edges would light P/2 - 1).
+    for steps in sorted({n for n in (3, 4, 6, 9, 12, 18) if period % n == 0}):
+        coding = PhaseCoding(float(period), steps, "binary")
+        j = np.arange(10 * period, dtype=np.float64)
+        for step in range(1, steps + 1):
+            lit = coding.values(step, j)
+            # Shift 2 pi step / N moves the stripe's centre to j = -step P / N (mod P).
+            centre = (-step * period // steps) % period
+            distance = np.abs((j - centre + period / 2) % period - period / 2)
+            np.testing.assert_array_equal(lit, (distance <= period / 4).astype(float))
+            counts = lit.reshape(10, period).sum(axis=1)
+            assert np.all(counts == period // 2 + 1), (steps, step, counts)

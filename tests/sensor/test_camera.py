@@ -249,3 +249,23 @@ def test_saturated_pixels_are_in_the_ground_truth(tmp_path) -> None:
     capture = Capture(sequence, rig, frame_data=rendering.frames, gt_data=rendering.gt)
     loaded = Capture.load(capture.save(tmp_path / "c").parent)
     np.testing.assert_array_equal(loaded.ground_truth.mask_saturated, expected)
+
+
+@pytest.mark.parametrize("black", [0.0, 64.0, 100.5])
+def test_saturation_level_of_a_well_below_the_adc_range_includes_the_black_level(black) -> None:
+    # K * well + black: 0.1 DN/e- x 20,000 e- = 2000 DN above a black level of ``black`` DN,
+    # well below the 12-bit full scale. A flat field ten times brighter than the well reads
+    # exactly that level, and nothing below it is saturated.
+    sensor = Sensor(
+        bit_depth=12, exposure=1.0, system_gain_dn_per_e=0.1, saturation_capacity_e=20000.0,
+        black_level_dn=black,
+    )  # fmt: skip
+    assert sensor.saturation_dn == int(np.floor(2000.0 + black))
+    bright, _ = _flat_pair(sensor, 20000.0, 1000)
+    assert np.all(bright == sensor.saturation_dn)
+    # 100 DN below the well (7 standard deviations of its ~14 DN shot noise): not saturated.
+    below, _ = _flat_pair(sensor, 1900.0, 1000)
+    assert np.all(below < sensor.saturation_dn)
+    # A well above the ADC range saturates at full scale whatever the black level.
+    deep = sensor.with_(saturation_capacity_e=50000.0)
+    assert deep.saturation_dn == deep.full_scale == 4095

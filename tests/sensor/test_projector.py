@@ -270,3 +270,26 @@ def test_the_device_synthesis_agrees_with_the_host_one() -> None:
     jit = render(small_rig(), default_scene(), default_sequence(), synthesis="jit", **kwargs)
     difference = np.abs(sparse.frames.astype(np.int32) - jit.frames)
     assert difference.max() <= 1 and np.mean(difference > 0) < 1e-3
+
+
+@pytest.mark.parametrize("gamma", [1.0, 2.2])
+def test_precompensated_values_are_sent_on_the_8_bit_grid(gamma: float) -> None:
+    # The projector is sent quantise(g^-1(p)): whole levels k / 255, then its response.
+    # Undo the response here (p**gamma, no black level) and the sent values must be k / 255,
+    # the levels round(255 (p)^(1 / gamma)) of the ideal pattern p (not its 8-bit profile).
+    sequence = build_sequence(WIDTH, HEIGHT, periods=18.0, steps=3, gray_bits=6,
+                              directions=("v",))  # fmt: skip
+    model = ProjectorModel(gamma=gamma, precompensate=True)
+    j = np.arange(WIDTH, dtype=np.float64)
+    for index, frame in enumerate(sequence.frames):
+        light = model.emitted_profile(sequence, index)
+        sent = light ** (1.0 / gamma) * 255
+        np.testing.assert_allclose(sent, np.rint(sent), rtol=0, atol=1e-9, err_msg=str(index))
+        if frame.kind == "phase":
+            ideal = 0.5 + 0.5 * np.cos(2 * np.pi * j / 18.0 + 2 * np.pi * frame.step / 3)
+            np.testing.assert_allclose(sent, np.rint(255 * ideal ** (1 / gamma)), atol=1e-9)
+    if gamma == 1.0:  # a linear projector: pre-compensation sends the plain 8-bit profile
+        for index in range(len(sequence)):
+            np.testing.assert_array_equal(
+                model.emitted_profile(sequence, index), sequence.profile(index)
+            )

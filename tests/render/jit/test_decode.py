@@ -16,6 +16,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from tests import tolerances as tol
 from virtus.errors import InputError, VirtusError
 from virtus.patterns import (
     DecodeWarning,
@@ -445,3 +446,113 @@ def test_unsupported_plan_is_refused_clearly() -> None:
     frames = frames_to_device(np.zeros((len(sequence), 4, 4), np.uint8), VARIANT)
     with pytest.raises(VirtusError, match="unsupported"):
         decode_on_device(frames, sequence, 4, 4)
+
+
+# --- against ground truth, not only against the host ------------------------------------
+# A mistake made in both decoders passes every host-vs-device comparison above; these
+# compare the device decode (and the host's) with the exact projector coordinates.
+
+
+def plane_coordinates(sequence: PatternSequence, shape=(HEIGHT, WIDTH)) -> tuple[np.ndarray, ...]:
+    """Exact projector coordinates (px) of each camera pixel of a gently curved surface
+    inside the projector (0.5 px from its ends)."""
+    rows, cols = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
+    du = 2.0 * np.sin(rows / 7.0) * np.sin(np.pi * cols / (shape[1] - 1))
+    dv = 1.5 * np.cos(cols / 9.0) * np.sin(np.pi * rows / (shape[0] - 1))
+    u = 0.5 + (sequence.width - 2.0) * cols / (shape[1] - 1) + du
+    v = 0.5 + (sequence.height - 2.0) * rows / (shape[0] - 1) + dv
+    return u, v
+
+
+def near_plain_code_edges(sequence: PatternSequence, direction: str, w: np.ndarray) -> np.ndarray:
+    """Pixels whose coordinate lies within CODE_EDGE_BAND_PX of an edge of a code without
+    the complementary frame (ambiguous there by design, see tests/patterns/test_codings.py)."""
+    from tests.patterns.test_codings import code_edges
+
+    plan = sequence.plans()[direction]
+    if plan.code is None or plan.code.coding.complement:
+        return np.zeros(w.shape, dtype=bool)
+    edges = code_edges(sequence, direction)
+    return np.min(np.abs(w[..., None] - edges), axis=-1) < tol.CODE_EDGE_BAND_PX
+
+
+@pytest.mark.parametrize("name", sorted(SEQUENCES))
+def test_device_decode_of_ideal_frames_gives_the_true_coordinates(name: str) -> None:
+    sequence = SEQUENCES[name]()
+    u, v = plane_coordinates(sequence)
+    frames = np.empty((len(sequence), HEIGHT, WIDTH))
+    for index, frame in enumerate(sequence.frames):
+        frames[index] = 30.0 + 180.0 * sequence.values(index, u if frame.direction == "v" else v)
+    frames = np.rint(frames).astype(np.uint8)
+    host, device = decode_both(sequence, frames)
+    for result in (device, host):
+        for column, (direction, truth) in enumerate((("v", u), ("h", v))):
+            mask = getattr(result, f"mask_{direction}")
+            assert mask.all(), direction  # every pixel lies on the projector
+            keep = ~near_plain_code_edges(sequence, direction, truth)
+            error = np.abs(result.proj_uv[..., column] - truth)[keep]
+            profiles = {f.profile for f in sequence.frames if f.direction == direction}
+            if profiles & {"binary", "dithered"}:
+                assert error.max() < tol.DECODE_BINARY_MAX_PX, direction  # a staircase
+            else:
+                # 8-bit rounding of the fringes: a phase error, px in proportion to T.
+                period = sequence.periods(direction)[0] / sequence.axis_scale(direction)
+                phase_error = error.max() * 2 * np.pi / period
+                assert phase_error < tol.DECODE_PHASE_8BIT_FEW_STEPS_RAD, direction
+
+
+def test_device_heavy_noise_leaves_no_valid_pixel_half_a_period_off() -> None:
+    # The residual mask on the device (tests/patterns/test_decode_reliability.py on the host).
+    from tests.patterns.test_decode_reliability import (
+        HEAVY_NOISE_AMPLITUDE_DN,
+        heavy_noise_frames,
+        order_errors,
+    )
+
+    for name in sorted(HEAVY_NOISE_AMPLITUDE_DN):
+        sequence, frames, u, v = heavy_noise_frames(name)
+        result = decode_on_device(frames_to_device(frames, VARIANT), sequence, *frames.shape[1:])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DecodeWarning)
+            device = result.to_host(sequence)
+        assert order_errors(device, sequence, u, v) == 0, name
+        assert device.mask.mean() > 0.5, name
+
+
+@pytest.mark.parametrize("method", ["temporal", "heterodyne"])
+def test_device_flags_and_masks_pixels_by_their_residual(method: str) -> None:
+    from tests.patterns.test_decode_reliability import (
+        CLEAN_RAD,
+        CRAFTED,
+        FLAGGED_RAD,
+        INVALID_RAD,
+        crafted_frames,
+        residual_groups,
+    )
+
+    sequence, erred = CRAFTED[method]
+    shares = {CLEAN_RAD: 500, FLAGGED_RAD: 300, INVALID_RAD: 200}
+    u, v, residual = residual_groups(shares, 5)
+    frames = crafted_frames(sequence, erred, u, v, residual / 8.0).astype(np.float32)
+    result = decode_on_device(frames_to_device(frames, VARIANT), sequence, *frames.shape[1:])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DecodeWarning)
+        device = result.to_host(sequence)
+    for direction in ("v", "h"):
+        mask = getattr(device, f"mask_{direction}")
+        np.testing.assert_array_equal(mask, residual <= FLAGGED_RAD, err_msg=direction)
+        flagged = getattr(device, f"flagged_{direction}")
+        np.testing.assert_array_equal(flagged, residual == FLAGGED_RAD, err_msg=direction)
+
+
+def test_device_decodes_offset_and_negative_sign_to_the_true_coordinates() -> None:
+    from tests.patterns.test_codings import formula_frames, offset_sign_sequence
+
+    sequence = offset_sign_sequence("offset-0.5-sign-minus")
+    u, v = plane_coordinates(sequence)
+    frames = np.rint(formula_frames(sequence, u, v, 25.0, 190.0)).astype(np.uint8)
+    result = decode_on_device(frames_to_device(frames, VARIANT), sequence, HEIGHT, WIDTH)
+    device = result.to_host(sequence)
+    assert device.mask.all()
+    error = device.proj_uv - np.stack([u, v], axis=-1)
+    assert np.max(np.abs(error)) < tol.DECODE_MAX_PX

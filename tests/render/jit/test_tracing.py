@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests import tolerances as tol
 from tests.support import small_rig
 from virtus.geometry.devices import Camera, Projector, Rig, default_rig
 from virtus.geometry.optics import Intrinsics, ThinLens
@@ -232,3 +233,107 @@ def test_scenes_that_read_files_are_not_cached(tmp_path) -> None:
     mesh = MeshObject(path=path, pose=Pose(np.eye(3), (0.0, 0.0, 1.0)))
     assert _reads_files(Scene([mesh]))
     assert not _reads_files(default_scene())
+
+
+# --- synthesis against the analytic pattern values ----------------------------------------
+# A mistake made in both synthesis paths passes the host-vs-device comparisons above; here
+# both are held to frame values computed from the pattern formulas at known taps.
+
+
+def known_taps(lookup: str):
+    """A one-row host Trace whose pixel i has two taps: weight 1 at (u_i, v_i) and weight 2
+    at (u_i + 3, v_i + 2), ambient 0.25; u_i, v_i sweep the projector with sub-pixel
+    offsets (nearest: -0.4, 0, 0.3 px from a centre; bilinear: quarter pixels)."""
+    from virtus.render.tracing import Trace
+
+    fractions = (-0.4, 0.0, 0.3) if lookup == "nearest" else (0.0, 0.25, 0.5, 0.75)
+    j = np.repeat(np.arange(1, 900), len(fractions))
+    u = j + np.tile(fractions, 899)
+    v = (np.arange(u.size) % 1130 + 1) + np.tile(fractions[::-1], 899)
+    n = u.size
+    taps = {
+        "u_p": np.stack([u, u + 3], axis=1).astype(np.float32),
+        "v_p": np.stack([v, v + 2], axis=1).astype(np.float32),
+        "weight": np.tile(np.array([1.0, 2.0], np.float32), (n, 1)),
+    }
+    trace = Trace(
+        height=1, width=n, spp=2, projector_width=912, projector_height=1140,
+        ambient=np.full(n, 0.25, np.float32), gt=None, variant=VARIANT, **taps,
+    )  # fmt: skip
+    return trace, taps
+
+
+def analytic_value(sequence, index: int, x: np.ndarray, lookup: str) -> np.ndarray:
+    """The projected value of frame ``index`` at projector coordinates ``x`` along its axis:
+    the 8-bit level of the frame formula at a pixel centre (phase frames; codes read from
+    the profile, which tests/patterns checks against the Gray code), the pixel containing
+    ``x`` (nearest) or the linear interpolation between the two nearest centres."""
+    frame = sequence.frames[index]
+    if frame.kind in ("white", "black"):
+        return np.full(x.shape, 1.0 if frame.kind == "white" else 0.0)
+
+    def level(pixel: np.ndarray) -> np.ndarray:
+        if frame.kind == "phase":
+            x = 2 * np.pi * pixel / frame.period + 2 * np.pi * frame.step / frame.steps
+            return np.rint(255 * (0.5 + 0.5 * np.cos(x))) / 255
+        return sequence.profile(index)[pixel]
+
+    if lookup == "nearest":
+        return level(np.floor(x + 0.5).astype(np.int64))
+    left = np.floor(x).astype(np.int64)
+    fraction = x - left
+    return (1 - fraction) * level(left) + fraction * level(left + 1)
+
+
+@pytest.mark.parametrize("lookup", ["nearest", "bilinear"])
+def test_synthesised_frames_are_the_pattern_values_at_the_taps(lookup: str) -> None:
+    from virtus.render.jit.synthesis import synthesize_digital
+    from virtus.render.synthesis import synthesize
+
+    sequence = default_sequence()
+    trace, taps = known_taps(lookup)
+    # 4 x 255 DN per unit radiance on a 16-bit ideal sensor: every expected frame value is a
+    # whole number of DN (quarter-pixel fractions of 8-bit levels), far from rounding edges.
+    exposure, sensor = 1020.0, Sensor(bit_depth=16)
+    expected = np.empty((len(sequence), trace.width))
+    for index, frame in enumerate(sequence.frames):
+        axis = "v_p" if frame.direction == "h" else "u_p"
+        values = [analytic_value(sequence, index, taps[axis][:, k].astype(float), lookup)
+                  for k in (0, 1)]  # fmt: skip
+        expected[index] = exposure * (values[0] + 2.0 * values[1] + 0.25)
+    assert np.allclose(expected, np.rint(expected), atol=1e-6)
+    device = synthesize_digital(trace, sequence, lookup, sensor, exposure)[:, 0, :]
+    np.testing.assert_array_equal(device, np.rint(expected))
+    host = synthesize(trace, sequence, lookup)[:, 0, :]
+    np.testing.assert_array_equal(sensor.digitize(host, exposure), np.rint(expected))
+
+
+def test_device_taps_are_the_analytic_taps_of_a_tilted_plane() -> None:
+    # One pixel-centre sample per pixel on a tilted Lambertian plane (camera = world frame),
+    # with lens distortion on both devices: each tap is the projector pixel of the ray's
+    # hit and the point-source radiance rho cos(theta_i) |X_p| / z_p^3 (module docstring of
+    # virtus.render.tracing), computed here in float64.
+    from tests.support import LAMBERT, tilted_plane
+    from virtus.scene.model import PlaneObject, Scene
+
+    rig = distorted_rig()
+    plane = PlaneObject(tilted_plane().size_m, tilted_plane().pose, LAMBERT)
+    camera, projector = rig.camera.intrinsics, rig.projector.intrinsics
+    device = trace_device(rig, Scene([plane]), variant=VARIANT, spp=1)
+    rays = camera.unproject(camera.pixel_grid().reshape(-1, 2))
+    normal, origin = plane.pose.R[:, 2], plane.pose.t
+    points = rays * ((normal @ origin) / (rays @ normal))[:, None]
+    x_p = rig.cam2proj.apply(points)
+    uv = projector.project(x_p)
+    centre = rig.proj2cam.t  # the projector's centre in the camera frame
+    to_projector = centre - points
+    cos_i = np.abs(to_projector @ normal) / np.linalg.norm(to_projector, axis=1)
+    radiance = LAMBERT.albedo * cos_i * np.linalg.norm(x_p, axis=1) / x_p[:, 2] ** 3
+    inside = (uv[:, 0] > 1) & (uv[:, 0] < projector.width - 2)
+    inside &= (uv[:, 1] > 1) & (uv[:, 1] < projector.height - 2)
+    assert inside.mean() > 0.5
+    u_p, v_p = device.u_p.numpy(), device.v_p.numpy()
+    np.testing.assert_allclose(u_p[inside], uv[inside, 0], atol=tol.DEVICE_TAP_PX)
+    np.testing.assert_allclose(v_p[inside], uv[inside, 1], atol=tol.DEVICE_TAP_PX)
+    weight = device.weight.numpy()
+    np.testing.assert_allclose(weight[inside], radiance[inside], rtol=tol.RADIANCE_REL)
