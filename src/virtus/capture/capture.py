@@ -11,7 +11,10 @@ lengths in metres, camera frame; projector coordinates in projector pixels)::
     DIR/capture.json        format, units, rig (rig schema), cam2world, sequence
                             (PatternSequence.to_dict), sensor, seed, bit depth, render
                             settings (rendered captures), scene, frame files, gt files,
-                            provenance (virtus version, command, source)
+                            provenance (virtus version, command, source); optional
+                            calibration_source (imports: where each rig parameter came
+                            from, "calibrated": false for a placeholder rig) and
+                            camera_pixel_size_m (imports given the pixel pitch)
     DIR/frames/000.png ...  one 8- or 16-bit grey PNG per frame, in sequence order
                             (10- and 12-bit frames are stored in 16-bit PNGs, unscaled)
     DIR/gt/depth.npy        (H, W) float64, z along the camera axis; NaN where no surface
@@ -79,6 +82,7 @@ UNITS = {
 _KEYS = (
     "format", "virtus_version", "units", "rig", "cam2world", "sequence", "sensor", "seed",
     "bit_depth", "render", "scene", "frames", "gt", "provenance", "extra",
+    "calibration_source", "camera_pixel_size_m",
 )  # fmt: skip
 #: Sub-folders a capture owns (removed when it is overwritten).
 _OWNED = ("frames", "gt", "scene_assets")
@@ -175,6 +179,11 @@ class Capture:
         empty for imported captures.
     provenance : virtus version, source (``"rendered"`` or ``"imported"``), command line.
     path : the directory it was loaded from or saved to, if any.
+    calibration_source : for an imported capture, where each parameter of ``rig`` came from
+        (:meth:`virtus.calib.sources.CalibrationSources.to_dict`); ``"calibrated": False``
+        marks a placeholder rig (imported without a calibration: decode, calibrate from it,
+        never triangulate with it). None: the rig is the true or given one.
+    camera_pixel_size_m : the camera's pixel pitch, metres, when given (for a digital twin).
     """
 
     sequence: PatternSequence
@@ -191,6 +200,8 @@ class Capture:
     path: Path | None = None
     frame_files: tuple[Path, ...] = field(default=(), repr=False)
     gt_files: dict[str, Path] = field(default_factory=dict, repr=False)
+    calibration_source: dict[str, Any] | None = None
+    camera_pixel_size_m: float | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.sequence, PatternSequence):
@@ -210,6 +221,20 @@ class Capture:
                 object.__setattr__(self, "bit_depth", bit_depth_of(self.frame_data))
         if self.bit_depth not in BIT_DEPTHS:
             raise InputError("bit_depth", f"one of {BIT_DEPTHS}", self.bit_depth)
+        if self.calibration_source is not None and not isinstance(self.calibration_source, dict):
+            raise InputError("calibration_source", "an object or None", self.calibration_source)
+        pitch = self.camera_pixel_size_m
+        if pitch is not None and (
+            isinstance(pitch, bool)
+            or not isinstance(pitch, int | float)
+            or not 0 < pitch < float("inf")
+        ):
+            raise InputError("camera_pixel_size_m", "a positive number of metres or None", pitch)
+
+    @property
+    def calibrated(self) -> bool:
+        """False for a capture imported without a calibration (its rig is a placeholder)."""
+        return (self.calibration_source or {}).get("calibrated", True) is not False
 
     def _check_frames(self, frames: np.ndarray) -> None:
         if frames.ndim != 3 or frames.dtype not in (np.uint8, np.uint16):
@@ -258,6 +283,11 @@ class Capture:
         if not self.gt_files:
             raise VirtusError(f"{self.path or 'capture'}: this capture has no ground truth")
         cam = self.rig.camera.intrinsics
+        missing = [path for path in self.gt_files.values() if not path.is_file()]
+        if missing:
+            where, root = (self.path / MANIFEST, self.path) if self.path else ("capture", None)
+            names = [p.relative_to(root).as_posix() if root else str(p) for p in missing[:3]]
+            raise InputError(f"{where}", "the ground-truth files it lists", f"missing {names}")
         arrays = {}
         for name, path in self.gt_files.items():
             array = load_npy(path, f"ground truth {name}")
@@ -324,6 +354,10 @@ class Capture:
             ),
             "provenance": self.provenance,
         }
+        if self.calibration_source is not None:
+            data["calibration_source"] = self.calibration_source
+        if self.camera_pixel_size_m is not None:
+            data["camera_pixel_size_m"] = float(self.camera_pixel_size_m)
         return data
 
     def file_names(self) -> list[str]:
@@ -420,9 +454,14 @@ class Capture:
         if not isinstance(gt_entry, dict):
             raise InputError(f"{manifest} gt", "an object of file names", gt_entry)
         gt_files = {str(k): _inside(directory, v, "gt") for k, v in gt_entry.items()}
-        missing = [str(p) for p in (*frame_files, *gt_files.values()) if not p.is_file()]
+        missing = [str(p) for p in frame_files if not p.is_file()]
         if missing:
             raise InputError(f"{manifest}", "the files it lists", f"missing {missing[:3]}")
+        if not any(path.is_file() for path in gt_files.values()):
+            # ground truth removed (gt/ deleted to share the frames): a capture without it;
+            # decoding and reconstruction need none. A part of it missing is a damaged
+            # capture, refused when the ground truth is read.
+            gt_files = {}
         sensor = Sensor.from_dict(data["sensor"]) if data.get("sensor") else None
         bit_depth = data.get("bit_depth")
         if bit_depth is None:  # format 1: 8 or 16 from the file dtype
@@ -453,7 +492,22 @@ class Capture:
             path=directory,
             frame_files=frame_files,
             gt_files=gt_files,
+            calibration_source=_optional(data, "calibration_source", dict, manifest),
+            camera_pixel_size_m=_optional(data, "camera_pixel_size_m", float, manifest),
         )
+
+
+def _optional(data: dict[str, Any], key: str, kind: type, manifest: Path) -> Any:
+    """``data[key]`` if present and not null (a ``dict``, or a ``float`` from a number)."""
+    value = data.get(key)
+    if value is None:
+        return None
+    if kind is float and isinstance(value, int | float) and not isinstance(value, bool):
+        return float(value)
+    if not isinstance(value, kind):
+        want = "an object" if kind is dict else "a number"
+        raise InputError(f"{manifest} {key}", f"{want} or null", value)
+    return value
 
 
 def _inside(directory: Path, name: object, what: str) -> Path:
@@ -476,6 +530,8 @@ def import_capture(
     bit_depth: int | None = None,
     cam2world: Pose | None = None,
     command: list[str] | None = None,
+    calibration_source: dict[str, Any] | None = None,
+    camera_pixel_size_m: float | None = None,
 ) -> Capture:
     """A capture from camera images taken on a real bench (or by another renderer).
 
@@ -491,6 +547,9 @@ def import_capture(
         thresholds are relative to.
     cam2world : the camera pose, if known.
     command : the command line to record (default ``sys.argv``).
+    calibration_source : where the rig's parameters came from (``capture.json``'s
+        ``calibration_source``; ``"calibrated": False`` for a placeholder rig).
+    camera_pixel_size_m : the camera's pixel pitch, metres, if known.
     """
     files = list_images(images) if isinstance(images, str | Path) else [Path(p) for p in images]
     if len(files) != len(sequence):
@@ -521,6 +580,8 @@ def import_capture(
             **_provenance("imported", command),
             "images": [str(p) for p in files],
         },
+        calibration_source=calibration_source,
+        camera_pixel_size_m=camera_pixel_size_m,
     )
 
 

@@ -7,7 +7,13 @@ from typing import Annotated
 
 import typer
 
-from virtus.cli.options import OverwriteOption, UnitsOption
+from virtus.cli.options import (
+    CameraSizeOption,
+    OverwriteOption,
+    PixelSizeOption,
+    UnitsOption,
+    parse_size,
+)
 
 
 def import_(
@@ -21,15 +27,19 @@ def import_(
     sequence: Annotated[
         Path, typer.Option(help="Pattern sequence file (YAML/JSON) describing the frames.")
     ],
-    calibration: Annotated[
-        Path,
-        typer.Option(
-            help="Calibration: rig JSON, OpenCV YAML/XML, or a folder of the paper code's "
-            "text files."
-        ),
-    ],
     out: Annotated[Path, typer.Option(help="Capture directory to write.")],
+    calibration: Annotated[
+        Path | None,
+        typer.Option(
+            help="Calibration: rig JSON, OpenCV YAML/XML, NumPy .npz, a mapping .yaml, or a "
+            "folder of calibration text files. Omit it for captures of a board to calibrate "
+            "the bench from (virtus calibrate --captures): they decode, and reconstruct asks "
+            "for --calibration."
+        ),
+    ] = None,
     units: UnitsOption = None,
+    camera_size: CameraSizeOption = None,
+    pixel_size_um: PixelSizeOption = None,
     bit_depth: Annotated[
         int | None,
         typer.Option(
@@ -51,9 +61,10 @@ def import_(
 
     from virtus.pipeline.capture import import_images
 
+    size = parse_size(camera_size)
     result = import_images(
         images, sequence, calibration, out, units=units and units.value, bit_depth=bit_depth,
-        overwrite=overwrite, resume=resume,
+        camera_size=size, pixel_size_um=pixel_size_um, overwrite=overwrite, resume=resume,
     )  # fmt: skip
     table = Table(title=f"virtus import -> {out}", show_header=False)
     capture = result.capture
@@ -64,8 +75,17 @@ def import_(
         f"{capture.bit_depth}-bit (full scale {capture.full_scale})",
     )
     table.add_row("sequence", f"{sequence} ({len(result.sequence)} frames)")
-    table.add_row("calibration", f"{calibration} (baseline {result.rig.baseline_m * 1e3:.2f} mm)")
+    if result.sources.calibrated:
+        baseline = f"baseline {result.rig.baseline_m * 1e3:.2f} mm"
+        table.add_row("calibration", f"{calibration} ({baseline}, {result.sources.format})")
+    else:
+        table.add_row("calibration", "none: a placeholder rig (decode, calibrate --captures)")
     Console().print(table)
+    # One plain line per parameter source (never wrapped: paths stay whole).
+    for label, text in result.sources.lines():
+        typer.echo(f"{label}: {text}")
+    if pixel_size_um is not None:
+        typer.echo(f"camera pixel size: {pixel_size_um:g} um (recorded for a digital twin)")
     Console().print(f"next: virtus decode {out}")
 
 

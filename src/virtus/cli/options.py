@@ -52,6 +52,25 @@ UnitsOption = Annotated[
     LengthUnit | None,
     typer.Option(help="Length unit of a calibration file that states none: mm or m."),
 ]
+#: ``--camera-size W,H``: the camera's image size (pixels), for a calibration that lacks it;
+#: parsed by :func:`parse_size`.
+CameraSizeOption = Annotated[
+    str | None,
+    typer.Option(
+        "--camera-size",
+        metavar="W,H",
+        help="Camera image size 'W,H' in pixels, for a calibration file that states none "
+        "(checked against the images and the file).",
+    ),
+]
+#: ``--pixel-size-um``: the camera's pixel pitch, recorded for a digital twin.
+PixelSizeOption = Annotated[
+    float | None,
+    typer.Option(
+        "--pixel-size-um",
+        help="Camera pixel pitch in micrometres (recorded in capture.json for a digital twin).",
+    ),
+]
 #: ``--overwrite``: the run may replace another run's directory (its files are removed first).
 OverwriteOption = Annotated[
     bool, typer.Option("--overwrite", help="Remove an earlier run's files in OUT first.")
@@ -220,6 +239,21 @@ def load_sequence_option(path: Path | None, width: int, height: int):  # noqa: A
             f"{sequence.width}x{sequence.height} px in {path}",
         )
     return sequence
+
+
+def parse_size(text: str | None, option: str = "--camera-size") -> tuple[int, int] | None:
+    """``(width, height)`` from ``'W,H'`` (or ``'WxH'``), or None; the library checks that
+    both are positive."""
+    from virtus.errors import InputError
+
+    if text is None:
+        return None
+    parts = text.replace("x", ",").replace("X", ",").split(",")
+    try:
+        width, height = (int(part.strip()) for part in parts)
+    except ValueError:
+        raise InputError(option, "'W,H' (two whole numbers of pixels)", text) from None
+    return width, height
 
 
 def parse_lens(text: str | None, option: str):  # noqa: ANN201

@@ -21,12 +21,14 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from virtus.calib.sources import CalibrationSources
 from virtus.capture.capture import MANIFEST, Capture
 from virtus.capture.scandir import DERIVED_FILES, SCAN_LAYOUT
+from virtus.checks import positive
 from virtus.errors import InputError, VirtusError
 from virtus.geometry.devices import Rig
 from virtus.io.runs import RunDirectory, claim_run
@@ -223,23 +225,29 @@ class ImportResult:
     directory : the capture directory.
     capture : the capture written (or the complete one a resumed run kept).
     sequence : the pattern sequence describing the frames.
-    rig : the calibration read.
+    rig : the calibration read (a placeholder rig for an import without a calibration).
+    sources : where each parameter of ``rig`` came from
+        (:class:`~virtus.calib.sources.CalibrationSources`; also in ``capture.json`` as
+        ``calibration_source``).
     """
 
     directory: Path
     capture: Capture
     sequence: PatternSequence
     rig: Rig
+    sources: CalibrationSources
 
 
 def import_images(
     images: str | Path,
     sequence_file: str | Path,
-    calibration: str | Path,
+    calibration: str | Path | None,
     out_dir: str | Path,
     *,
     units: str | None = None,
     bit_depth: int | None = None,
+    camera_size: tuple[int, int] | None = None,
+    pixel_size_um: float | None = None,
     overwrite: bool = False,
     resume: bool = False,
 ) -> ImportResult:
@@ -251,12 +259,21 @@ def import_images(
     images : a folder of 8/10/12/16-bit PNG, TIFF or BMP frames (natural order), or, when the
         sequence file lists its own images, the folder they are in (else the sequence file's).
     sequence_file : the pattern sequence file (YAML/JSON) describing the frames.
-    calibration : a calibration file (:func:`virtus.calib.io.load_calibration`); image sizes
-        it lacks are taken from the frames and the sequence.
+    calibration : a calibration file (:func:`virtus.calib.io.load_calibration_report`); image
+        sizes it lacks are taken from the frames and the sequence. None: captures for
+        calibrating the bench (e.g. board poses for ``virtus calibrate --captures``): the rig
+        is a placeholder (:func:`virtus.calib.sources.uncalibrated_rig`: the real image
+        sizes, a nominal K, no baseline) recorded as uncalibrated, so ``virtus decode``
+        works and ``virtus reconstruct`` asks for ``--calibration``.
     out_dir : the capture directory, owned by the run (``run.json`` with the inputs'
         checksums).
-    units : length unit of a calibration file that states none (``"mm"`` or ``"m"``).
+    units : length unit of a calibration file that states none (``"mm"`` or ``"m"``);
+        refused without a calibration.
     bit_depth : the camera's ADC bits; None: the smallest that holds the data.
+    camera_size : ``(width, height)`` of the camera, for a calibration that lacks it; must
+        match the images (and a size the file states).
+    pixel_size_um : the camera's pixel pitch, micrometres (> 0), recorded in
+        ``capture.json`` (``camera_pixel_size_m``) for a digital twin.
     overwrite, resume : as for :func:`capture_scene`.
 
     Raises
@@ -264,13 +281,11 @@ def import_images(
     InputError, VirtusError : unreadable or inconsistent inputs (all read and checked before
         ``out_dir`` is claimed); ``out_dir`` in use or holding another run's files.
     """
-    from virtus.calib.io import load_calibration
     from virtus.capture.capture import import_capture
     from virtus.io.images import list_images, read_image
     from virtus.patterns import load_sequence_file
-    from virtus.reconstruct import check_baseline
 
-    images, sequence_file, calibration = Path(images), Path(sequence_file), Path(calibration)
+    images, sequence_file = Path(images), Path(sequence_file)
     seq, listed = load_sequence_file(sequence_file)
     if listed:
         base = images if images.is_dir() else sequence_file.parent
@@ -279,40 +294,90 @@ def import_images(
         files = images
     # The camera size is needed to read the paper code's text files, which lack it.
     first = read_image(files[0] if isinstance(files, list) else list_images(files)[0])
-    camera_size = (first.shape[1], first.shape[0])
-    rig = load_calibration(
-        calibration,
-        units=units,
-        camera_size=camera_size,
-        projector_size=(seq.width, seq.height),
+    size = _camera_size((first.shape[1], first.shape[0]), camera_size)
+    pitch_m = None if pixel_size_um is None else positive("--pixel-size-um", pixel_size_um) * 1e-6
+    rig, sources = _import_rig(calibration, units, size, camera_size is not None, seq)
+    # Every input is read and checked before OUT is claimed.
+    imported = import_capture(
+        files, seq, rig, bit_depth=bit_depth, calibration_source=sources.to_dict(),
+        camera_pixel_size_m=pitch_m,
+    )  # fmt: skip
+    image_files = files if isinstance(files, list) else list_images(files)
+    inputs: dict[str, str | Path] = {"sequence": sequence_file}
+    if calibration is not None and Path(calibration).is_dir():
+        inputs.update({f"calibration/{f.name}": f for f in sorted(Path(calibration).iterdir())
+                       if f.is_file()})  # fmt: skip
+    elif calibration is not None:
+        inputs["calibration"] = calibration
+        inputs.update({f"calibration/{Path(f).name}": f for f in sources.files[1:]})
+    inputs.update({f"image/{i:04d}": f for i, f in enumerate(image_files)})
+    config: dict[str, Any] = {
+        "images": [str(f) for f in image_files],
+        "sequence": str(sequence_file),
+        "calibration": None if calibration is None else str(calibration),
+        "units": units,
+        "bit_depth": bit_depth,
+    }
+    if camera_size is not None:
+        config["camera_size"] = list(size)
+    if pixel_size_um is not None:
+        config["pixel_size_um"] = pixel_size_um
+    capture = capture_job(
+        out_dir, IMPORT_COMMAND, config, lambda run: imported, inputs=inputs,
+        overwrite=overwrite, resume=resume,
+    )  # fmt: skip
+    return ImportResult(Path(out_dir), capture, seq, rig, sources)
+
+
+def _camera_size(images: tuple[int, int], given: tuple[int, int] | None) -> tuple[int, int]:
+    """The camera size (width, height): the images', which ``--camera-size`` must match."""
+    from virtus.calib.formats import given_size
+
+    size = given_size("--camera-size", given)
+    if size is not None and size != images:
+        raise InputError(
+            "--camera-size", f"the images' size {images[0]},{images[1]}", f"{size[0]},{size[1]}"
+        )
+    return images
+
+
+def _import_rig(
+    calibration: str | Path | None,
+    units: str | None,
+    camera_size: tuple[int, int],
+    size_given: bool,
+    seq: PatternSequence,
+) -> tuple[Rig, CalibrationSources]:
+    """The rig of an import and its record: read from ``calibration`` (sizes it lacks from
+    the images and the sequence, said so in the record), or the placeholder rig."""
+    from virtus.calib.io import load_calibration_report
+    from virtus.calib.sources import uncalibrated_rig
+    from virtus.reconstruct import check_baseline
+
+    projector_size = (seq.width, seq.height)
+    if calibration is None:
+        if units is not None:
+            raise InputError("--units", "a --calibration whose translations they are", units)
+        return uncalibrated_rig(camera_size, projector_size)
+    calibration = Path(calibration)
+    rig, sources = load_calibration_report(
+        calibration, units=units, camera_size=camera_size, projector_size=projector_size
     )
-    if (rig.projector.width, rig.projector.height) != (seq.width, seq.height):
+    if (rig.projector.width, rig.projector.height) != projector_size:
         raise InputError(
             "--sequence",
             f"patterns for the calibration's {rig.projector.width}x{rig.projector.height} "
             "px projector",
             f"{seq.width}x{seq.height} px",
         )
-    # Every input is read and checked before OUT is claimed.
     check_baseline(rig, f"calibration {calibration}")
-    imported = import_capture(files, seq, rig, bit_depth=bit_depth)
-    image_files = files if isinstance(files, list) else list_images(files)
-    inputs: dict[str, str | Path] = {"sequence": sequence_file}
-    if calibration.is_dir():
-        inputs.update({f"calibration/{f.name}": f for f in sorted(calibration.iterdir())
-                       if f.is_file()})  # fmt: skip
-    else:
-        inputs["calibration"] = calibration
-    inputs.update({f"image/{i:04d}": f for i, f in enumerate(image_files)})
-    config = {
-        "images": [str(f) for f in image_files],
-        "sequence": str(sequence_file),
-        "calibration": str(calibration),
-        "units": units,
-        "bit_depth": bit_depth,
+    camera = "--camera-size" if size_given else "the images"
+    said = {
+        "camera": f"{camera} ({camera_size[0]}x{camera_size[1]})",
+        "projector": f"the pattern sequence ({projector_size[0]}x{projector_size[1]})",
     }
-    capture = capture_job(
-        out_dir, IMPORT_COMMAND, config, lambda run: imported, inputs=inputs,
-        overwrite=overwrite, resume=resume,
-    )  # fmt: skip
-    return ImportResult(Path(out_dir), capture, seq, rig)
+    devices = {
+        device: dict(values, size=said[device]) if values["size"].startswith("given") else values
+        for device, values in (("camera", sources.camera), ("projector", sources.projector))
+    }
+    return rig, replace(sources, **devices)

@@ -36,6 +36,7 @@ why: black, saturated or too weak fringes), and a reconstruction with no point.
 
 from __future__ import annotations
 
+import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -46,6 +47,7 @@ from virtus.calib.io import load_rig_file
 from virtus.capture.capture import Capture
 from virtus.capture.scandir import (
     DERIVED_FILES,
+    POINTS_PLY,
     SCAN_LAYOUT,
     frames_checksum,
     load_decoded,
@@ -54,8 +56,10 @@ from virtus.capture.scandir import (
 from virtus.errors import InputError, VirtusError
 from virtus.geometry.devices import Rig
 from virtus.geometry.transforms import Pose
+from virtus.io import check_replaceable
 from virtus.io.runs import RunDirectory, claim_run, directory_lock
 from virtus.patterns import DecodeResult
+from virtus.patterns.decode import check_saturation_level
 from virtus.pipeline.capture import builtin_scene_in_run, complete_capture, save_capture
 from virtus.reconstruct import (
     DEFAULT_MIN_MODULATION,
@@ -140,6 +144,10 @@ def _decode_checked(capture: Capture, options: dict[str, Any]) -> DecodeResult:
         why = f"every pixel of every frame is saturated ({full} DN)"
     elif low == high:
         why = f"every frame is one flat value ({low} DN): no fringes"
+    elif (level := options.get("saturation_level")) is not None and (
+        frames.max(axis=0) >= level
+    ).all():
+        why = f"every pixel reaches --saturation-level {level:g} in some frame"
     else:
         with np.errstate(all="ignore"):
             peak = float(np.nanmax(decoded.modulation)) / full if decoded.modulation.size else 0.0
@@ -184,6 +192,10 @@ def decode_capture(
     VirtusError : no pixel decodes (nothing is written), or the directory is in use.
     """
     capture = Capture.load(capture_dir)
+    # before anything is read: a level outside the frames' range would blame the modulation
+    saturation_level = check_saturation_level(
+        saturation_level, capture.full_scale, "--saturation-level"
+    )
     if capture.has_ground_truth:  # a capture is read whole: a corrupt file is refused
         capture.ground_truth  # noqa: B018
     options = {
@@ -220,7 +232,8 @@ def reconstruct_capture(
     ----------
     capture_dir : capture or scan directory.
     calibration : a calibration file (see :func:`virtus.calib.io.load_calibration`) or a
-        rig; None uses the rig in ``capture.json`` (the true rig of a virtual capture).
+        rig; None uses the rig in ``capture.json`` (the true rig of a virtual capture),
+        refused for a capture imported without a calibration (a placeholder rig).
     out_ply : PLY path; default ``capture_dir/points.ply``.
     use, edge_max_step : see :func:`virtus.reconstruct.reconstruct`.
     units : length unit of a calibration file that states none (``"mm"`` or ``"m"``).
@@ -234,6 +247,13 @@ def reconstruct_capture(
     if isinstance(calibration, Rig):
         rig = calibration
     elif calibration is None:
+        if not capture.calibrated:  # imported without a calibration: a placeholder rig
+            raise InputError(
+                "calibration",
+                f"a calibration file (--calibration FILE): {capture_dir} was imported "
+                "without one and its rig is a placeholder",
+                "none",
+            )
         rig = capture.rig
     else:
         rig = load_rig_file(calibration, capture.rig, units=units)
@@ -247,6 +267,7 @@ def reconstruct_capture(
     check_baseline(
         rig, "calibration" if calibration is not None else f"{capture_dir}/capture.json rig"
     )
+    _check_ply_target(Path(capture_dir), out_ply)  # before decoding: nothing done in vain
     with directory_lock(capture_dir):
         decoded = load_decoded(capture_dir, capture)
         if decoded is None:
@@ -258,6 +279,27 @@ def reconstruct_capture(
         )
         recon.save(capture_dir, out_ply, _reconstruction_source(capture, use, edge_max_step))
     return recon
+
+
+def _check_ply_target(capture_dir: Path, out_ply: str | Path | None) -> None:
+    """Refuse a PLY path :func:`reconstruct_capture` could not write or should not replace:
+    a device, FIFO, socket, directory or symbolic link, a path under a file or in a
+    read-only folder, or a name without ``.ply`` (``--out DIR/capture.json`` would replace
+    the capture's own manifest)."""
+    what = "output PLY (--out)" if out_ply is not None else "output PLY"
+    path = check_replaceable(
+        Path(out_ply) if out_ply is not None else capture_dir / POINTS_PLY, what
+    )
+    if path.suffix.lower() != ".ply":
+        raise InputError(f"{what} {path}", "a file name ending in .ply", path.name)
+    folder = path.parent  # created if missing: its nearest existing ancestor must take it
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        raise InputError(f"{what} {path}", "a path under a folder", f"{folder.name} is a file")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        where = folder.name or str(folder)
+        raise InputError(f"{what} {path}", "a path in a writable folder", f"{where} is read-only")
 
 
 def _reconstruction_source(
