@@ -141,3 +141,81 @@ def test_twin_validation_round_trip(tmp_path, capsys):
     assert [row["name"] for row in table["per_pose"]] == [p.name for p in poses]
     assert table["overall"]["cloud_mae_mm"] <= tol.TWIN_CALIBRATED_MAE_MM
     assert calibrated.rig.camera.intrinsics.has_distortion
+
+
+def _plane_captures(folder) -> None:
+    """The photometric tests' three plane poses, rendered with their true light."""
+    from tests.twin.test_photometric import POSES, TRUE_PROJECTOR, TRUE_SENSOR, plane, scanner
+
+    truth = scanner(TRUE_SENSOR, TRUE_PROJECTOR)
+    for index, pose in enumerate(POSES):
+        truth.capture(plane(*pose), rng=30 + index).save(folder / f"plane_{index}")
+
+
+def test_twin_fit_command_writes_models_the_scanner_reads(tmp_path, capsys):
+    """``virtus twin CALIB --fit CAPTURE...``: DIR/sensor.yaml and DIR/projector.yaml are
+    sensor and projector files (``--sensor FILE``, ``--projector FILE``) holding the light
+    the captures were rendered with, DIR/photometric.json the ambient level and the report."""
+    from tests.twin.test_photometric import AMBIENT, RIG, TRUE_PROJECTOR, TRUE_SENSOR
+    from virtus.sensor.camera import load_sensor
+    from virtus.sensor.projector import load_projector
+
+    _plane_captures(tmp_path / "planes")
+    RIG.save_json(tmp_path / "calib.json")
+    (tmp_path / "camera.yaml").write_text("bit_depth: 10\nblack_level_dn: 8.0\n")
+    (tmp_path / "lamp.yaml").write_text("contrast_ratio: 500.0\n")
+    planes = [str(tmp_path / "planes" / f"plane_{i}") for i in range(3)]
+    args = ["twin", str(tmp_path / "calib.json"), "--out", str(tmp_path / "t"), "--fit"]
+    args += [*planes, "--albedo", "0.7", "--sensor", str(tmp_path / "camera.yaml")]
+    assert _run_cli([*args, "--projector", str(tmp_path / "lamp.yaml")]) == 0
+    assert "sensor.yaml" in capsys.readouterr().out
+    sensor = load_sensor(tmp_path / "t" / "sensor.yaml")
+    projector = load_projector(tmp_path / "t" / "projector.yaml")
+    report = json.loads((tmp_path / "t" / "photometric.json").read_text())
+    rel = tol.PHOTOMETRIC_FIT_REL
+    assert sensor.name == "fitted" and sensor.vignetting == "cos4" and sensor.bit_depth == 10
+    assert sensor.system_gain_dn_per_e == pytest.approx(TRUE_SENSOR.system_gain_dn_per_e, rel=rel)
+    assert sensor.exposure == pytest.approx(TRUE_SENSOR.exposure, rel=rel)
+    assert projector.gamma == pytest.approx(TRUE_PROJECTOR.gamma, rel=rel)
+    assert projector.psf_sigma_px == pytest.approx(TRUE_PROJECTOR.psf_sigma_px, rel=rel)
+    assert projector.falloff == "cos4" and projector.contrast_ratio == 500.0
+    assert report["ambient"] == pytest.approx(AMBIENT, rel=rel)
+    assert len(report["captures"]) == 3 and report["shading"]["separable"]
+    # captures after both options are ambiguous: one line
+    both = ["twin", str(tmp_path / "calib.json"), "--out", str(tmp_path / "u")]
+    both += ["--fit", planes[0], "--validate", planes[1], planes[2]]
+    assert _run_cli(both) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "only one of --fit and --validate" in err
+
+
+@pytest.mark.slow
+def test_fitted_twin_validation_matches_the_frames(tmp_path):
+    """Board captures rendered with the true light (gamma, blur, fall-off, vignetting,
+    ambient, noise) against their twin: with the light fitted from plane captures the
+    normalised frames differ by the noise alone and the point noise agrees; the geometric
+    twin (ideal projector) is far off."""
+    from tests.twin import test_photometric as light
+    from virtus.scene.model import Scene
+
+    _plane_captures(tmp_path / "planes")
+    board = board_from_spec("4x7")
+    texture = board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=BOARD_BLUR_M)
+    truth = light.scanner(light.TRUE_SENSOR, light.TRUE_PROJECTOR)
+    rig = light.RIG
+    for index, pose in enumerate(pose_set("random:3", rig, board, np.random.default_rng(5))):
+        scene = Scene(objects=board_scene(board, pose, texture).objects, ambient=light.AMBIENT)
+        truth.capture(scene, rng=40 + index).save(tmp_path / "boards" / pose.name)
+    twin = tmp_path / "twin"
+    write_twin(
+        rig.save_json(tmp_path / "rig.json"), twin, fit=[tmp_path / "planes"], albedo=0.7,
+        sensor=light.PRIOR_SENSOR, projector=light.PRIOR_PROJECTOR,
+    )  # fmt: skip
+    geometric = validate_twin(rig, [tmp_path / "boards"], board="4x7").overall
+    fitted = validate_twin(rig, [tmp_path / "boards"], board="4x7", twin=twin).overall
+    assert fitted["fringe_rms"] <= tol.TWIN_FITTED_FRAME_RMS < geometric["fringe_rms"]
+    assert fitted["white_rms"] <= tol.TWIN_FITTED_FRAME_RMS
+    assert fitted["black_rms"] < 0.25 * geometric["black_rms"]
+    assert fitted["point_noise_ratio"] == pytest.approx(1.0, abs=tol.PHOTOMETRIC_POINT_NOISE_REL)
+    assert geometric["point_noise_ratio"] < 0.5  # an ideal projector's staircase
+    assert fitted["cloud_mae_mm"] < geometric["cloud_mae_mm"]

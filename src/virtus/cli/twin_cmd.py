@@ -1,14 +1,78 @@
-"""``virtus twin``: the digital twin of a calibrated rig for Isaac Sim, and its validation
-against the real captures (:mod:`virtus.pipeline.twin`)."""
+"""``virtus twin``: the digital twin of a calibrated rig for Isaac Sim, its light fitted to
+real captures, and its validation against them (:mod:`virtus.pipeline.twin`)."""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
 from virtus.cli.options import UnitsOption
+
+FitOption = Annotated[
+    list[Path] | None,
+    typer.Option(
+        "--fit",
+        help="Real captures (phase shifts with white and black frames, e.g. of a matte plane at "
+        "several distances; directories or folders of them) to fit the twin's camera and "
+        "projector to: OUT/sensor.yaml, OUT/projector.yaml, OUT/photometric.json; --validate "
+        "then renders with them.",
+    ),
+]
+ValidateOption = Annotated[
+    list[Path] | None,
+    typer.Option(
+        "--validate",
+        help="Real calibration captures (directories or folders of them) to re-render "
+        "with the twin and compare; more may follow as arguments.",
+    ),
+]
+MoreOption = Annotated[
+    list[Path] | None,
+    typer.Argument(help="More captures (of --fit or --validate, whichever is given)."),
+]
+PriorSensorOption = Annotated[
+    str | None,
+    typer.Option(
+        "--sensor", help="With --fit: the camera as known (preset or file): black level, PRNU."
+    ),
+]
+PriorProjectorOption = Annotated[
+    str | None,
+    typer.Option(
+        "--projector",
+        help="With --fit: the projector as known (preset or file): contrast, fill factor.",
+    ),
+]
+#: Columns of the printed tables: geometry, then light.
+GEOMETRY_COLUMNS = (
+    "centre_diff_mean_px", "centre_diff_max_px", "proj_uv_rms_px", "cloud_mae_mm",
+    "cloud_rmse_mm",
+)  # fmt: skip
+LIGHT_COLUMNS = ("white_rms", "black_rms", "fringe_rms", "code_rms", "point_noise_ratio")
+
+
+def _print_validation(console: Any, result: Any, path: Path) -> None:
+    from rich.table import Table
+
+    rows = [*result.per_pose, {"name": "overall", **result.overall}]
+    for title, columns in (
+        ("real - twin", GEOMETRY_COLUMNS),
+        ("real - twin, light", LIGHT_COLUMNS),
+    ):
+        table = Table(title=title)
+        table.add_column("pose")
+        for column in columns:
+            table.add_column(column, justify="right")
+        for row in rows:
+            table.add_row(row["name"], *(f"{row.get(c, float('nan')):.4f}" for c in columns))
+        console.print(table)
+    console.print(
+        f"paper: real-to-virtual MAE {result.overall['paper_cloud_mae_mm']} mm; wrote {path}"
+    )
+    for name, reason in result.dropped.items():
+        console.print(f"[yellow]dropped {name}:[/yellow] {reason}")
 
 
 def register(app: typer.Typer) -> None:
@@ -19,17 +83,14 @@ def register(app: typer.Typer) -> None:
             typer.Argument(help="Calibration file (calibration.json, OpenCV YAML, txt folder)."),
         ],
         out: Annotated[Path, typer.Option(help="Output directory.")] = Path("virtus-twin"),
-        validate: Annotated[
-            list[Path] | None,
-            typer.Option(
-                "--validate",
-                help="Real calibration captures (directories or folders of them) to re-render "
-                "with the twin and compare; more may follow as arguments.",
-            ),
-        ] = None,
-        more_captures: Annotated[
-            list[Path] | None, typer.Argument(help="More captures (with --validate).")
-        ] = None,
+        fit: FitOption = None,
+        validate: ValidateOption = None,
+        more_captures: MoreOption = None,
+        albedo: Annotated[
+            float, typer.Option(help="With --fit: albedo of the captured surface.")
+        ] = 1.0,
+        sensor: PriorSensorOption = None,
+        projector: PriorProjectorOption = None,
         board: Annotated[
             str | None, typer.Option(help="Board spec (default: the calibration file's).")
         ] = None,
@@ -42,43 +103,43 @@ def register(app: typer.Typer) -> None:
         """Write OUT/rig.json, OUT/isaac.json (Isaac Sim parameters in USD's convention:
         lens and film values in tenths of a scene unit, metersPerUnit, lens distortion,
         projector RectLight size at 1 m, poses in Isaac's world) and, with usd-core,
-        OUT/twin.usda. With --validate, re-render every captured pose with the twin and
-        write OUT/validation.json."""
+        OUT/twin.usda. With --fit, fit the twin's light (projector gamma and blur,
+        vignetting and fall-off, exposure, ambient level, gain and noise) to real captures.
+        With --validate, re-render every captured pose with the twin and write
+        OUT/validation.json."""
         from rich.console import Console
-        from rich.table import Table
 
         from virtus.errors import InputError
         from virtus.pipeline.twin import VALIDATION_FILE, validate_twin, write_twin
 
-        if more_captures and not validate:
-            raise InputError("arguments", "captures after --validate", more_captures)
+        extra = list(more_captures or [])
+        if extra and not (validate or fit):
+            raise InputError("arguments", "captures after --fit or --validate", extra)
+        if extra and validate and fit:
+            raise InputError(
+                "arguments",
+                "captures after only one of --fit and --validate (repeat the option, or give "
+                "a folder of captures)",
+                extra,
+            )
+        fits = [*(fit or []), *(extra if not validate else [])]
         unit = None if units is None else units.value
         console = Console()
-        written = write_twin(calibration, out, meters_per_unit=meters_per_unit, units=unit)
+        written = write_twin(
+            calibration, out, meters_per_unit=meters_per_unit, units=unit, fit=fits or None,
+            albedo=albedo, sensor=sensor, projector=projector,
+        )  # fmt: skip
         for path in written.values():
             console.print(f"wrote {path}")
         if not validate:
             return
         result = validate_twin(
             calibration,
-            [*validate, *(more_captures or [])],
+            [*validate, *(extra if not fit else [])],
             board=board,
             spp=spp,
             out=out / VALIDATION_FILE,
             units=unit,
+            twin=out if fits else None,
         )
-        table = Table(title="real - twin")
-        columns = ("centre_diff_mean_px", "centre_diff_max_px", "proj_uv_rms_px")
-        columns += ("cloud_mae_mm", "cloud_rmse_mm")
-        table.add_column("pose")
-        for column in columns:
-            table.add_column(column, justify="right")
-        for row in [*result.per_pose, {"name": "overall", **result.overall}]:
-            table.add_row(row["name"], *(f"{row.get(c, float('nan')):.4f}" for c in columns))
-        console.print(table)
-        console.print(
-            f"paper: real-to-virtual MAE {result.overall['paper_cloud_mae_mm']} mm; "
-            f"wrote {out / VALIDATION_FILE}"
-        )
-        for name, reason in result.dropped.items():
-            console.print(f"[yellow]dropped {name}:[/yellow] {reason}")
+        _print_validation(console, result, out / VALIDATION_FILE)

@@ -20,7 +20,20 @@ the twin camera) -- and both captures are decoded and compared:
   decoded projector coordinates of the two captures on the board (pixels valid in both,
   inside the board plane less :data:`BOARD_EDGE_FRACTION`), px;
 * ``cloud_mae_mm``, ``cloud_rmse_mm``: distance from every real point (triangulated with the
-  twin rig) to the nearest virtual point, on the board, mm (the paper's 0.436 mm).
+  twin rig) to the nearest virtual point, on the board, mm (the paper's 0.436 mm);
+* ``white_rms``, ``black_rms``, ``fringe_rms``, ``code_rms``: RMS difference of the
+  normalised frames (each divided by its capture's mean white frame on the compared pixels),
+  real minus virtual, per kind of frame (:func:`virtus.twin.photometric.frame_differences`);
+* ``point_noise_real_mm``, ``point_noise_twin_mm``, ``point_noise_ratio``: RMS distance of
+  each cloud to its own fitted plane (the board is flat: the point noise), and real / twin.
+
+:func:`write_photometry` is ``virtus twin CALIB --fit CAPTURES...``: the twin's light,
+fitted to real captures (phase shifts with white and black frames, e.g. of a matte plane at
+several distances) by :func:`virtus.twin.photometric.fit_photometry`: ``DIR/sensor.yaml``
+and ``DIR/projector.yaml`` (files ``--sensor`` and ``--projector`` read: gamma, blur,
+fall-off, vignetting, exposure, gain, dark noise) and ``DIR/photometric.json`` (the ambient
+level and every fitted number). :func:`validate_twin` given the twin directory renders with
+them (and the ambient level).
 """
 
 from __future__ import annotations
@@ -41,22 +54,31 @@ from virtus.errors import InputError, VirtusError
 from virtus.geometry.devices import Rig
 from virtus.geometry.transforms import Pose
 from virtus.io.jsonio import write_json
+from virtus.io.runs import atomic_write
 from virtus.io.safeio import read_json
+from virtus.metrology.plane import fit_plane
 from virtus.pipeline.calibrate import capture_dirs
 from virtus.reconstruct import points_from_decoded
 from virtus.scanner import Scanner
-from virtus.sensor.camera import Sensor
+from virtus.sensor.camera import Sensor, load_sensor
+from virtus.sensor.projector import ProjectorModel, load_projector
 from virtus.twin.parameters import DEFAULT_PIXEL_SIZE_M, twin_parameters
+from virtus.twin.photometric import PhotometricFit, fit_photometry, frame_differences
 
 __all__ = [
     "ISAAC_FILE",
     "PAPER_CLOUD_MAE_MM",
+    "PHOTOMETRY_FILE",
+    "PROJECTOR_FILE",
     "RIG_FILE",
+    "SENSOR_FILE",
     "USD_FILE",
     "VALIDATION_FILE",
     "TwinValidation",
     "compare_captures",
+    "load_photometry",
     "validate_twin",
+    "write_photometry",
     "write_twin",
 ]
 
@@ -72,6 +94,8 @@ RIG_FILE, ISAAC_FILE, USD_FILE, VALIDATION_FILE = (
     "twin.usda",
     "validation.json",
 )
+#: Files written by :func:`write_photometry` (``virtus twin --fit``).
+SENSOR_FILE, PROJECTOR_FILE, PHOTOMETRY_FILE = "sensor.yaml", "projector.yaml", "photometric.json"
 
 
 def write_twin(
@@ -81,11 +105,16 @@ def write_twin(
     meters_per_unit: float = 1.0,
     pixel_size_m: float = DEFAULT_PIXEL_SIZE_M,
     units: str | None = None,
+    fit: list[str | Path | Capture] | None = None,
+    albedo: float = 1.0,
+    sensor: str | Path | Sensor | None = None,
+    projector: str | Path | ProjectorModel | None = None,
 ) -> dict[str, Path]:
     """Write the twin of a calibration (module docstring); returns name -> path written.
 
     ``calibration``: any file :func:`virtus.calib.io.load_calibration` reads (``units`` for
-    files that state none).
+    files that state none). With ``fit`` (captures), the twin's light too
+    (:func:`write_photometry` with ``albedo``, ``sensor`` and ``projector``).
     """
     rig = load_calibration(calibration, units=units)
     out = Path(out_dir)
@@ -103,7 +132,79 @@ def write_twin(
     except VirtusError as error:  # usd-core missing: the JSON files are the twin
         if "usd-core" not in str(error):
             raise
+    if fit:
+        written.update(
+            write_photometry(rig, fit, out, albedo=albedo, sensor=sensor, projector=projector)
+        )
     return written
+
+
+def _yaml(path: Path, data: dict[str, Any], what: str) -> Path:
+    import yaml
+
+    text = f"# {what}, fitted by virtus twin --fit (report: {PHOTOMETRY_FILE})\n"
+    text += yaml.safe_dump(data, sort_keys=False)
+    return atomic_write(path, lambda tmp: Path(tmp).write_text(text))
+
+
+def write_photometry(
+    rig: Rig,
+    captures: list[str | Path | Capture],
+    out_dir: str | Path,
+    *,
+    albedo: float = 1.0,
+    sensor: str | Path | Sensor | None = None,
+    projector: str | Path | ProjectorModel | None = None,
+) -> dict[str, Path]:
+    """Fit the twin's camera and projector to real captures and write ``sensor.yaml``,
+    ``projector.yaml`` and ``photometric.json`` (module docstring).
+
+    Parameters
+    ----------
+    rig : the twin's (calibrated) rig.
+    captures : capture directories, folders of them, or captures.
+    out_dir : the twin directory.
+    albedo : diffuse albedo of the captured surface (sets the exposure).
+    sensor, projector : what is known and not fitted (a preset, a file or a model):
+        the camera's black level, PRNU, DSNU; the projector's contrast ratio and fill factor.
+    """
+    items: list[Any] = list(captures)
+    if items and all(isinstance(item, str | Path) for item in items):
+        items = capture_dirs(items)
+    loaded = [item if isinstance(item, Capture) else Capture.load(item) for item in items]
+    prior_sensor = load_sensor(sensor) if isinstance(sensor, str | Path) else sensor
+    prior_projector = load_projector(projector) if isinstance(projector, str | Path) else projector
+    fit = fit_photometry(
+        loaded, rig, prior_sensor=prior_sensor, prior_projector=prior_projector, albedo=albedo
+    )
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    report = fit.to_dict()
+    report["captures"] = [str(c.path) if c.path is not None else None for c in loaded]
+    return {
+        "sensor": _yaml(out / SENSOR_FILE, fit.sensor.to_dict(), "camera"),
+        "projector": _yaml(out / PROJECTOR_FILE, fit.projector.to_dict(), "projector"),
+        "photometry": write_json(out / PHOTOMETRY_FILE, report),
+    }
+
+
+def load_photometry(twin: str | Path) -> PhotometricFit | None:
+    """The fitted light of a twin directory (:func:`write_photometry`), or None if it has
+    none: its sensor and projector files and the ambient level of its report."""
+    directory = Path(twin)
+    if not (directory / SENSOR_FILE).is_file() or not (directory / PROJECTOR_FILE).is_file():
+        return None
+    report = {}
+    if (directory / PHOTOMETRY_FILE).is_file():
+        report = read_json(directory / PHOTOMETRY_FILE, "twin photometry", expect=dict)
+    ambient = report.get("ambient", 0.0)
+    if isinstance(ambient, bool) or not isinstance(ambient, int | float) or ambient < 0:
+        raise InputError(f"{directory / PHOTOMETRY_FILE}: ambient", "a number >= 0", ambient)
+    return PhotometricFit(
+        load_sensor(directory / SENSOR_FILE),
+        load_projector(directory / PROJECTOR_FILE),
+        float(ambient),
+    )
 
 
 @dataclass
@@ -161,6 +262,53 @@ def _on_board(rig: Rig, board: Board, board2cam: Pose) -> np.ndarray:
     return inside.reshape(intr.height, intr.width)
 
 
+def _board_words(board: Board) -> str:
+    """``"7x13 circle grid"`` or ``"6x9 checkerboard"`` (inner corners), for messages."""
+    kind = "checkerboard" if board.TYPE == "checkerboard" else "circle grid"
+    return f"{board.rows}x{board.cols} {kind}"  # type: ignore[union-attr]
+
+
+def _check_board(board: Board, recorded: Any, spec: Any, items: list[Any]) -> None:
+    """Refuse a board the captures do not show (naming ``--board`` when it was given): one
+    of other geometry than the calibration file's board, or one found in none of the
+    captures (its grid is searched in the white frame, else the phase background, until
+    one capture shows it)."""
+    from virtus.calib.detect import find_grid
+
+    name = "--board" if spec is not None else "board (of the calibration file)"
+    if spec is not None and recorded is not None:
+        calibrated = board_from_dict(recorded)
+        same = (
+            calibrated.TYPE == board.TYPE
+            and calibrated.object_points.shape == board.object_points.shape
+            and np.allclose(calibrated.object_points, board.object_points, rtol=0, atol=1e-9)
+        )
+        if not same:
+            raise InputError(
+                name,
+                f"the board the calibration used ({_board_words(calibrated)}, "
+                f"{calibrated.center_distance_m * 1e3:g} mm apart)",
+                f"{spec} ({_board_words(board)}, {board.center_distance_m * 1e3:g} mm apart)",
+            )
+
+    def shows(item: Any) -> bool:  # loaded here, not kept: the frames of one pose at a time
+        real = item if isinstance(item, Capture) else Capture.load(item)
+        kinds = [frame.kind for frame in real.sequence.frames]
+        if "white" in kinds:
+            image = real.frames[kinds.index("white")]
+        else:
+            image = real.decode().background
+        return find_grid(image, board) is not None
+
+    if items and not any(shows(item) for item in items):
+        raise InputError(
+            name,
+            "the board the captures show",
+            f"{spec or _board_words(board)}: no {_board_words(board)} found in any of the "
+            f"{len(items)} captures",
+        )
+
+
 def compare_captures(
     rig: Rig, board: Board, board2cam: Pose, real: Capture, virtual: Capture, name: str
 ) -> dict[str, Any]:
@@ -188,6 +336,10 @@ def compare_captures(
     row["cloud_mae_mm"] = float(1e3 * np.mean(distance))
     row["cloud_rmse_mm"] = float(1e3 * np.sqrt(np.mean(distance**2)))
     row["cloud_median_mm"] = float(1e3 * np.median(distance))
+    row.update(frame_differences(real, virtual, both))
+    row["point_noise_real_mm"] = float(1e3 * fit_plane(cloud_real).rms)
+    row["point_noise_twin_mm"] = float(1e3 * fit_plane(cloud_virtual).rms)
+    row["point_noise_ratio"] = row["point_noise_real_mm"] / row["point_noise_twin_mm"]
     return row
 
 
@@ -199,6 +351,7 @@ def validate_twin(
     spp: int = 1,
     out: str | Path | None = None,
     units: str | None = None,
+    twin: str | Path | PhotometricFit | None = None,
 ) -> TwinValidation:
     """Render every captured pose with the twin and compare (module docstring).
 
@@ -210,12 +363,19 @@ def validate_twin(
     board : the board (default: the calibration file's).
     spp : supersamples of the twin renders.
     out : if given, the table is written there as JSON.
+    twin : the twin's fitted light (a twin directory, :func:`load_photometry`, or a fit):
+        its camera, projector and ambient level render the poses; without it the captures'
+        own sensor (or an ideal one) and an ideal projector do.
 
     Raises
     ------
-    InputError : no board known, captures of another size than the calibration's camera.
+    InputError : no board known, captures of another size than the calibration's camera or
+        of another bit depth than the fitted camera's.
     """
     from virtus.render.settings import RenderSettings
+    from virtus.scene.model import Scene
+
+    light = load_photometry(twin) if isinstance(twin, str | Path) else twin
 
     poses: dict[str, Pose] = {}
     board_data = None
@@ -230,6 +390,7 @@ def validate_twin(
     items: list[Any] = list(captures)
     if items and all(isinstance(item, str | Path) for item in items):
         items = capture_dirs(items)
+    _check_board(the_board, board_data, board, items)  # before anything is rendered
     blur = CHECKER_BLUR_M if the_board.TYPE == "checkerboard" else BOARD_BLUR_M
     texture = the_board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=blur)
     per_pose: list[dict[str, Any]] = []
@@ -249,18 +410,40 @@ def validate_twin(
                 dropped[name] = obs.problem()  # type: ignore[assignment]
                 continue
             board2cam = _pnp(rig, the_board, obs.cam_centroids)  # type: ignore[arg-type]
+        sensor = real.sensor or Sensor().with_(bit_depth=real.bit_depth)
+        if light is not None and light.sensor.bit_depth != real.bit_depth:
+            raise InputError(
+                f"capture {name!r}", f"{light.sensor.bit_depth}-bit frames (the twin's camera)",
+                real.bit_depth,
+            )  # fmt: skip
         scanner = Scanner(
             rig=rig,
             sequence=real.sequence,
-            sensor=real.sensor or Sensor().with_(bit_depth=real.bit_depth),
+            sensor=sensor if light is None else light.sensor,
+            projector=ProjectorModel() if light is None else light.projector,
             render=RenderSettings(spp=spp),
         )
-        virtual = scanner.capture(board_scene(the_board, BoardPose(name, board2cam), texture))
+        scene = board_scene(the_board, BoardPose(name, board2cam), texture)
+        if light is not None and light.ambient > 0:
+            scene = Scene(objects=scene.objects, ambient=light.ambient)
+        virtual = scanner.capture(scene)
         per_pose.append(compare_captures(rig, the_board, board2cam, real, virtual, name))
     if not per_pose:
         raise VirtusError("twin validation: no pose could be compared" + f" ({dropped})")
+    result = TwinValidation(per_pose, _overall(per_pose), dropped)
+    if out is not None:
+        write_json(Path(out), result.to_dict())
+    return result
+
+
+def _overall(per_pose: list[dict[str, Any]]) -> dict[str, float]:
+    """The per-pose rows summed up (pixel-weighted where a row is an average over pixels)."""
     weights = np.array([row["pixels"] for row in per_pose], dtype=np.float64)
     centres = [r.get("centre_diff_mean_px", np.nan) for r in per_pose]
+
+    def pooled_rms(key: str) -> float:
+        return float(np.sqrt(np.average([r[key] ** 2 for r in per_pose], weights=weights)))
+
     overall = {
         "centre_diff_mean_px": float(np.mean(centres)),
         "centre_diff_max_px": float(
@@ -275,7 +458,9 @@ def validate_twin(
         ),
         "paper_cloud_mae_mm": PAPER_CLOUD_MAE_MM,
     }
-    result = TwinValidation(per_pose, overall, dropped)
-    if out is not None:
-        write_json(Path(out), result.to_dict())
-    return result
+    for key in ("white_rms", "black_rms", "fringe_rms", "code_rms"):
+        overall[key] = pooled_rms(key)
+    overall["point_noise_real_mm"] = pooled_rms("point_noise_real_mm")
+    overall["point_noise_twin_mm"] = pooled_rms("point_noise_twin_mm")
+    overall["point_noise_ratio"] = overall["point_noise_real_mm"] / overall["point_noise_twin_mm"]
+    return overall
