@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import pickle
 import shutil
 from collections.abc import Callable
@@ -23,6 +24,7 @@ import numpy as np
 import pytest
 
 from virtus.cli import main
+from virtus.errors import InputError
 from virtus.geometry.devices import Camera, Rig, default_rig
 from virtus.geometry.optics import Intrinsics
 from virtus.io.runs import directory_lock
@@ -650,3 +652,218 @@ def test_the_corpus_is_large_and_covers_every_command():
     assert len(CASES) >= 150
     assert {"capture", "scan", "calibrate", "import", "decode", "reconstruct", "evaluate",
             "demo", "ablation", "patterns", "rig"} <= commands  # fmt: skip
+
+
+# --- hardening: numbers of device files, lenses, distortion, key paths, boards, options -------
+# Each case names the culprit (the field, the key path of a non-finite number, the option)
+# and is refused before anything is rendered, decoded or written.
+
+
+def lut(values: list) -> str:
+    return f"response_lut: {json.dumps(values)}\n"
+
+
+RAMP = [i / 255 for i in range(256)]
+
+
+def nan_in_capture_json(cap: Path) -> None:
+    data = json.loads((cap / "capture.json").read_text())
+    data["rig"]["camera"]["K"][0][0] = float("nan")
+    (cap / "capture.json").write_text(json.dumps(data))  # json writes NaN
+
+
+def sequence_files(*names: str) -> Callable[[Path], None]:
+    """seq.json of the default sequence listing image files, the first ones ``names``."""
+
+    def build(work: Path) -> None:
+        from virtus.patterns import default_sequence
+
+        data = default_sequence(912, 1140).to_dict()
+        data["files"] = [*names, *(f"img{i}.png" for i in range(len(names), 52))]
+        (work / "seq.json").write_text(json.dumps(data))
+
+    return build
+
+
+def drop_decoded(cap: Path) -> None:
+    """No decoded/: a reconstruct would decode (and write decoded/) first."""
+    shutil.rmtree(cap / "decoded")
+
+
+CAPTURES = ["calibrate", "--captures", "{cap}", "--out", "{out}"]
+HARDENED_DEVICE_FILES = [
+    # (id, option, content, message): every numeric field checked for type, finiteness, range
+    ("sensor-percentile-text", "--sensor", "auto_percentile: x\n",
+     "auto_percentile: expected a percentile in (0, 100], got 'x'"),
+    ("sensor-percentile-zero", "--sensor", "auto_percentile: 0\n", "auto_percentile"),
+    ("sensor-exposure-text", "--sensor", "exposure: '5'\n", "exposure: expected"),
+    ("sensor-exposure-negative", "--sensor", "exposure: -3\n", "exposure: expected"),
+    ("sensor-target-list", "--sensor", "auto_target: [1]\n", "auto_target: expected"),
+    ("sensor-qe-bool", "--sensor", "quantum_efficiency: true\n", "quantum_efficiency"),
+    ("sensor-gain-text", "--sensor", "system_gain_dn_per_e: high\n", "system_gain_dn_per_e"),
+    ("sensor-well-zero", "--sensor", "system_gain_dn_per_e: 1\nsaturation_capacity_e: 0\n",
+     "saturation_capacity_e"),
+    ("sensor-depth-fraction", "--sensor", "bit_depth: 9.5\n", "bit_depth"),
+    ("sensor-seed-negative", "--sensor", "fixed_pattern_seed: -1\n", "fixed_pattern_seed"),
+    ("sensor-seed-fraction", "--sensor", "fixed_pattern_seed: 1.5\n", "fixed_pattern_seed"),
+    ("sensor-dark-text", "--sensor", "dark_noise_e: lots\n", "dark_noise_e"),
+    ("sensor-name-list", "--sensor", "name: [a]\n", "name: expected a non-empty string"),
+    ("sensor-prnu-nan", "--sensor", "prnu: .nan\n", "in prnu"),
+    ("projector-lut-number", "--projector", "response_lut: 5\n",
+     "response_lut: expected a list of 256 non-decreasing numbers"),
+    ("projector-lut-strings", "--projector", "response_lut: [a, b]\n", "response_lut: expected"),
+    ("projector-lut-256-strings", "--projector", lut(["a"] * 256), "got 'index 0: a'"),
+    ("projector-lut-nested", "--projector", lut([[0, 1]] * 256), "response_lut: expected"),
+    ("projector-lut-bool", "--projector", lut([*RAMP[:9], True, *RAMP[10:]]), "index 9: True"),
+    ("projector-lut-decreasing", "--projector", lut([*RAMP[:9], 0.0, *RAMP[10:]]),
+     "non-decreasing"),
+    ("projector-lut-end", "--projector", lut([*RAMP[:-1], 0.999]), "the light of level 255"),
+    ("projector-lut-inf", "--projector", "response_lut: [.inf]\n", "in response_lut[0]"),
+    ("projector-gamma-text", "--projector", "gamma: steep\n", "gamma"),
+    ("projector-contrast-huge", "--projector", "contrast_ratio: 1" + "0" * 400 + "\n",
+     "in contrast_ratio"),
+    ("projector-name-empty", "--projector", "name: ''\n", "name: expected a non-empty string"),
+]  # fmt: skip
+HARDENED = [
+    # (id, files, argv, message)
+    ("projector-lens-inside-focal-length", {}, [*CO, "--projector-lens", "0.01,0.001"],
+     "focus_distance_m: expected a focus distance beyond the focal length"),
+    ("camera-lens-inside-focal-length", {}, [*CO, "--camera-lens", "0.02,0.01"],
+     "focus_distance_m"),
+    ("rig-dist-7", {"bad.json": rig(**{"camera.dist": [0.1] * 7})},
+     [C, "--rig", "{w}/bad.json", "--out", "{out}"],
+     "camera.dist: expected 0, 4, 5, 8, 12 or 14 coefficients"),
+    ("rig-projector-dist-3", {"bad.json": rig(**{"projector.dist": [0.1, 0.0, 0.0]})},
+     [C, "--rig", "{w}/bad.json", "--out", "{out}"], "projector.dist: expected 0, 4, 5, 8"),
+    ("rig-dist-14-tilted", {"bad.json": rig(**{"camera.dist": [0.0] * 12 + [0.1, 0.0]})},
+     [C, "--rig", "{w}/bad.json", "--out", "{out}"], "camera.dist: expected at most 8"),
+    ("rig-nan-names-its-key", {"bad.json": rig().replace('"width": 64', '"width": NaN')},
+     ["rig", "info", "--rig", "{w}/bad.json"], "got 'NaN' in camera.width"),
+    ("rig-infinity-names-its-key",
+     {"bad.json": rig(**{"camera.dist": [0.1, 0.0, 0.0, 0.0, float("inf")]})},
+     [C, "--rig", "{w}/bad.json", "--out", "{out}"], "got 'Infinity' in camera.dist[4]"),
+    ("scene-nan-names-its-key", {"s.yaml": SPHERE.replace("0.1,", ".nan,")},
+     [*CO, "--scene", "{w}/s.yaml"], "got '.nan at line 2' in objects[0].radius_m"),
+    ("scene-ambient-inf", {"s.yaml": SPHERE + "ambient: .inf\n"}, [*CO, "--scene", "{w}/s.yaml"],
+     "in ambient"),
+    ("capture-json-nan-names-its-key", capture_edit(nan_in_capture_json), ["decode", "{cap}"],
+     "got 'NaN' in rig.camera.K[0][0]"),
+    ("board-spacing-negative", {}, [*CAL, "--board", "circles:4x11,spacing_mm=-40,diameter_mm=20"],
+     "board spacing_mm: expected a length > 0 (mm), got '-40'"),
+    ("board-spacing-nan", {}, [*CAL, "--board", "circles:4x11,spacing_mm=nan,diameter_mm=20"],
+     "board spacing_mm"),
+    ("board-diameter-touching", {},
+     [*CAL, "--board", "circles:4x11,spacing_mm=40,diameter_mm=30"],
+     "board diameter_mm: expected less than spacing_mm / sqrt(2)"),
+    ("board-spacing-bare", {}, [*CAL, "--board", "circles:4x11,spacing_mm,diameter_mm=20"],
+     "board spacing_mm"),
+    ("board-border-negative", {},
+     [*CAL, "--board", "circles:4x11,spacing_mm=40,diameter_mm=20,border_mm=-1"],
+     "board border_mm"),
+    ("board-square-inf", {}, [*CAL, "--board", "checker:6x9,square_mm=inf"], "board square_mm"),
+    ("decode-saturation-zero", {}, ["decode", "{cap}", "--saturation-level", "0"],
+     "--saturation-level: expected a level in (0, 255]"),
+    ("decode-saturation-negative", {}, ["decode", "{cap}", "--saturation-level", "-5"],
+     "--saturation-level: expected a level in (0, 255]"),
+    ("decode-saturation-above-full-scale", {}, ["decode", "{cap}", "--saturation-level", "300"],
+     "--saturation-level"),
+    ("decode-saturation-nan", {}, ["decode", "{cap}", "--saturation-level", "nan"],
+     "--saturation-level"),
+    ("calibrate-captures-poses", {}, [*CAPTURES, "--poses", "random:5"],
+     "--poses: expected no rendering option with --captures"),
+    ("calibrate-captures-spp", {}, [*CAPTURES, "--spp", "9"], "--spp: expected no rendering"),
+    ("calibrate-captures-sensor", {}, [*CAPTURES, "--sensor", "imx174"], "--sensor: expected no"),
+    ("calibrate-captures-seed", {}, [*CAPTURES, "--seed", "3"], "--seed: expected no rendering"),
+    ("calibrate-captures-rig", {}, [*CAPTURES, "--rig", "{rig}"], "--rig: expected no rendering"),
+    ("calibrate-captures-lookup", {}, [*CAPTURES, "--lookup", "psf"], "--lookup: expected no"),
+    ("calibrate-captures-bit-depth", {}, [*CAPTURES, "--bit-depth", "12"], "--bit-depth"),
+    ("import-sequence-one-image-twice",
+     {**IMPORT_OK, "seq.json": sequence_files("img0.png", "img0.png")}, IMP,
+     "files: expected a different image for every frame, got \"'img0.png' for frames 0 and 1\""),
+    ("import-sequence-one-image-twice-spelt-apart",
+     {**IMPORT_OK, "seq.json": sequence_files("img0.png", "img1.png", "./img0.png")}, IMP,
+     "'./img0.png' for frames 0 and 2"),
+    ("capture-sequence-one-image-twice", {"seq.json": sequence_files("a.png", "a.png")},
+     [*CO, "--sequence", "{w}/seq.json"], "'a.png' for frames 0 and 1"),
+    # --out is checked before anything is decoded (decoded/ removed: a decode would write it)
+    ("reconstruct-out-fifo", {"__cap__": drop_decoded, "o": lambda w: os.mkfifo(w / "o.ply")},
+     ["reconstruct", "{cap}", "--out", "{w}/o.ply"], "got 'a FIFO'"),
+    ("reconstruct-out-directory",
+     {"__cap__": drop_decoded, "o": lambda w: (w / "o.ply").mkdir()},
+     ["reconstruct", "{cap}", "--out", "{w}/o.ply"], "got 'a directory'"),
+    ("reconstruct-out-symlink",
+     {"__cap__": drop_decoded, "o": lambda w: (w / "o.ply").symlink_to(w / "rig.json")},
+     ["reconstruct", "{cap}", "--out", "{w}/o.ply"], "got 'a symbolic link to"),
+    ("reconstruct-out-device", capture_edit(drop_decoded),
+     ["reconstruct", "{cap}", "--out", "/dev/null"], "got 'a character device'"),
+    ("reconstruct-out-manifest", capture_edit(drop_decoded),
+     ["reconstruct", "{cap}", "--out", "{cap}/capture.json"], "a file name ending in .ply"),
+    ("reconstruct-out-under-a-file", capture_edit(drop_decoded),
+     ["reconstruct", "{cap}", "--out", "{w}/rig.json/x.ply"], "got 'rig.json is a file'"),
+]  # fmt: skip
+
+
+def _hardened_cases() -> list:
+    cases = [
+        pytest.param({"d.yaml": content}, [*CO, option, "{w}/d.yaml"], message, id=name)
+        for name, option, content, message in HARDENED_DEVICE_FILES
+    ]
+    cases += [
+        pytest.param(files, argv, message, id=name) for name, files, argv, message in HARDENED
+    ]
+    return cases
+
+
+@pytest.mark.parametrize(("files", "argv", "message"), _hardened_cases())
+def test_hardened_input_names_its_culprit(
+    files, argv, message, tmp_path, monkeypatch, capsys, request
+):
+    test_bad_input_is_one_line_exit_2_and_writes_nothing(
+        files, argv, message, tmp_path, monkeypatch, capsys, request
+    )
+
+
+def test_reconstruction_needs_no_ground_truth(template, tmp_path, capsys):
+    """A rendered capture whose gt/ was removed (to share its frames) decodes and
+    reconstructs; the ground truth itself is then reported missing, not assumed."""
+    from virtus.capture import Capture
+    from virtus.errors import VirtusError
+
+    cap = tmp_path / "cap"
+    shutil.copytree(template, cap)
+    shutil.rmtree(cap / "gt")
+    shutil.rmtree(cap / "decoded")
+    (cap / "points.ply").unlink()
+    for argv in (["decode", str(cap)], ["reconstruct", str(cap)]):
+        with pytest.raises(SystemExit) as exit_info:
+            main(argv)
+        assert exit_info.value.code == 0, capsys.readouterr().err
+    assert (cap / "points.ply").read_bytes().startswith(b"ply\n")
+    loaded = Capture.load(cap)
+    assert not loaded.has_ground_truth
+    with pytest.raises(VirtusError, match="has no ground truth"):
+        loaded.ground_truth  # noqa: B018
+    # one ground-truth file of several missing: a damaged capture, named when it is read
+    shutil.copytree(template / "gt", cap / "gt")
+    (cap / "gt" / "depth.npy").unlink()
+    damaged = Capture.load(cap)
+    with pytest.raises(InputError, match=r"files it lists, got \"missing \['gt/depth\.npy'\]"):
+        damaged.ground_truth  # noqa: B018
+
+
+def test_valid_inputs_next_to_the_hardened_ones_are_accepted(tmp_path):
+    from virtus.calib.board import board_from_spec
+    from virtus.geometry.optics import ThinLens
+    from virtus.sensor import load_projector, load_sensor
+
+    (tmp_path / "s.yaml").write_text("auto_percentile: 95\nexposure: 12\nbit_depth: 12\n")
+    assert load_sensor(tmp_path / "s.yaml").exposure == 12.0
+    (tmp_path / "p.yaml").write_text(lut(RAMP))
+    assert load_projector(tmp_path / "p.yaml").response_lut[-1] == 1.0
+    assert ThinLens(0.01, 0.0051).focus_distance_m == 0.0051  # beyond f/0.5's focal length
+    dist = [0.1, -0.05, 0.001, 0.002, 0.01, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    assert Rig.from_dict(_rig_dict(**{"camera.dist": dist})).camera.intrinsics.dist == tuple(
+        dist[:8]
+    )
+    board = board_from_spec("circles:4x11,spacing_mm=40,diameter_mm=20,border_mm=0")
+    assert board.center_distance_mm == 40.0

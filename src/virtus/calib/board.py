@@ -45,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from virtus.checks import as_float_array, positive, positive_int
+from virtus.checks import as_float_array, finite, positive, positive_int
 from virtus.errors import InputError
 
 #: metres per millimetre, the paper's ``k``.
@@ -109,7 +109,7 @@ class CircleBoard:
             raise InputError("cols", "an odd number of columns (e.g. 7, 9, 13)", self.cols)
         positive("circle_diameter_mm", self.circle_diameter_mm)
         positive("center_distance_mm", self.center_distance_mm)
-        if self.border_mm < 0:
+        if finite("border_mm", self.border_mm) < 0:
             raise InputError("border_mm", "a number >= 0", self.border_mm)
         size = as_float_array("plane_size_m", self.plane_size_m, (2,))
         if (size <= 0).any():
@@ -347,7 +347,7 @@ class CheckerBoard:
                 f"{self.rows}x{self.cols}",
             )
         positive("square_mm", self.square_mm)
-        if self.border_mm < 0:
+        if finite("border_mm", self.border_mm) < 0:
             raise InputError("border_mm", "a number >= 0 (mm)", self.border_mm)
         squares = np.array([self.cols + 1, self.rows + 1]) * self.square_mm * MM
         minimum = squares + 2 * self.border_mm * MM
@@ -537,15 +537,9 @@ def board_from_spec(
     kind, rows, cols = match.group(1), int(match.group(2)), int(match.group(3))
     options: dict[str, Any] = {}
     for item in filter(None, (part.strip() for part in match.group(4).split(","))):
-        key, _, value = item.partition("=")
+        key, equals, value = item.partition("=")
         key = key.strip().replace("-", "_")
-        if not value:
-            options[key] = True
-            continue
-        try:
-            options[key] = float(value)
-        except ValueError:
-            raise InputError(f"board {key}", "a number (millimetres)", value) from None
+        options[key] = _spec_option(key, value.strip()) if equals else True
     allowed = (
         {"spacing_mm", "diameter_mm", "border_mm", "white_on_black"}
         if kind == "circles"
@@ -554,6 +548,10 @@ def board_from_spec(
     unknown = sorted(set(options) - allowed)
     if unknown:
         raise InputError("board", f"options among {sorted(allowed)}", unknown)
+    for key, value in options.items():  # a length given as a bare word, a flag given a value
+        if (key == "white_on_black") != (value is True):
+            form = "a flag without '='" if key == "white_on_black" else "'=' and a length in mm"
+            raise InputError(f"board {key}", form, _item_text(key, value))
     if kind == "checker":
         if "square_mm" not in options:
             raise InputError("board square_mm", "the square size in mm (no default)", None)
@@ -572,13 +570,49 @@ def board_from_spec(
     w = (2 * border + (cols - 1) * spacing / 2 + diameter) * MM
     h = (2 * border + (rows - 1) * spacing + diameter + spacing / 2) * MM
     levels = (1.0, 0.25) if options.get("white_on_black") else (0.25, 1.0)
-    return CircleBoard(
-        rows=rows,
-        cols=cols,
-        circle_diameter_mm=diameter,
-        center_distance_mm=spacing,
-        border_mm=border,
-        plane_size_m=(w, h) if plane_size_m is None else plane_size_m,
-        circle_level=levels[0],
-        background_level=levels[1],
-    )
+    try:
+        return CircleBoard(
+            rows=rows,
+            cols=cols,
+            circle_diameter_mm=diameter,
+            center_distance_mm=spacing,
+            border_mm=border,
+            plane_size_m=(w, h) if plane_size_m is None else plane_size_m,
+            circle_level=levels[0],
+            background_level=levels[1],
+        )
+    except InputError as error:  # the spec's names, not the dataclass's
+        raise InputError(
+            f"board {_SPEC_NAMES.get(error.name, error.name)}",
+            _spec_words(error.expected),
+            error.got,
+        ) from None
+
+
+#: The spec's names of :class:`CircleBoard`'s parameters.
+_SPEC_NAMES = {"center_distance_mm": "spacing_mm", "circle_diameter_mm": "diameter_mm"}
+
+
+def _spec_words(text: str) -> str:
+    for name, spec_name in _SPEC_NAMES.items():
+        text = text.replace(name, spec_name)
+    return text
+
+
+def _item_text(key: str, value: object) -> str:
+    """A spec item as written: ``key`` or ``key=value``."""
+    return key if value is True else f"{key}={value:g}"
+
+
+def _spec_option(key: str, text: str) -> float:
+    """The millimetres of a spec item ``key=text``: a finite number, > 0 (``border_mm``:
+    >= 0), or :class:`InputError` naming ``board <key>``."""
+    name = f"board {key}"
+    expected = "a length >= 0 (mm)" if key == "border_mm" else "a length > 0 (mm)"
+    try:
+        value = float(text)
+    except ValueError:
+        raise InputError(name, expected, text) from None
+    if not np.isfinite(value) or value < 0 or (value == 0 and key != "border_mm"):
+        raise InputError(name, expected, text)
+    return value

@@ -37,6 +37,14 @@ MAX_IMAGE_PIXELS = 2**28
 _DICT_KEYS = ("width", "height", "K", "dist")
 #: Allowed numbers of distortion coefficients (OpenCV: 4, 5 or 8; 0 = none).
 _DIST_LENGTHS = (0, 4, 5, 8)
+#: Lengths of the distortion vectors read (:meth:`Intrinsics.from_opencv`, the rig's
+#: ``dist``): OpenCV's 4, 5, 8, 12 (thin prism) and 14 (tilted sensor), or 0 for none.
+#: The model stops at k6: the thin-prism and tilt terms of a 12 or 14 vector must be zero.
+#: Other lengths (a 7-vector, say) match no OpenCV model and are refused, not padded.
+OPENCV_DIST_LENGTHS = (0, 4, 5, 8, 12, 14)
+#: Smallest f-number of a lens (numerical aperture 1 in air): a thin lens of aperture A has
+#: a focal length of at least ``MIN_F_NUMBER * A``, so it focuses only beyond that distance.
+MIN_F_NUMBER = 0.5
 #: Newton iterations for undistortion; realistic lenses converge in 3-5.
 _UNDISTORT_ITERATIONS = 20
 #: Convergence threshold of the undistortion, in normalised image units (~1e-10 px).
@@ -122,17 +130,26 @@ class Intrinsics:
         width: int,
         height: int,  # noqa: N803
     ) -> Intrinsics:
-        """Build from an OpenCV camera matrix ``K`` (3, 3) and distortion vector (any shape)."""
+        """Build from an OpenCV camera matrix ``K`` (3, 3) and distortion vector (any shape)
+        of :data:`OPENCV_DIST_LENGTHS` coefficients."""
         K = as_float_array("K", K, (3, 3))  # noqa: N806
         if K[0, 1] != 0.0 or np.any(K[2] != (0.0, 0.0, 1.0)) or K[1, 0] != 0.0:
             raise InputError("K", "[[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (no skew)", K.tolist())
         coeffs = as_float_array("dist", dist).ravel() if dist is not None else np.zeros(0)
         if coeffs.size > 8 and np.any(coeffs[8:] != 0.0):
-            raise InputError("dist", "at most 8 coefficients (no thin-prism/tilt terms)", coeffs)
-        coeffs = coeffs[:8]
-        if coeffs.size not in _DIST_LENGTHS:  # e.g. (k1, k2) or 6 terms: pad with zeros
-            coeffs = np.pad(coeffs, (0, (5 if coeffs.size < 5 else 8) - coeffs.size))
-        return cls(K[0, 0], K[1, 1], K[0, 2], K[1, 2], width, height, tuple(coeffs))
+            raise InputError(
+                "dist",
+                "at most 8 coefficients (no thin-prism/tilt terms)",
+                f"{coeffs.size} with non-zero terms {coeffs[8:].tolist()} beyond k6",
+            )
+        if coeffs.size not in OPENCV_DIST_LENGTHS:
+            raise InputError(
+                "dist",
+                "0, 4, 5, 8, 12 or 14 coefficients, OpenCV's (k1, k2, p1, p2[, k3[, k4, k5, "
+                "k6[, s1, s2, s3, s4[, tx, ty]]]]), those beyond k6 zero",
+                f"{coeffs.size} coefficients",
+            )
+        return cls(K[0, 0], K[1, 1], K[0, 2], K[1, 2], width, height, tuple(coeffs[:8]))
 
     def to_opencv(self) -> tuple[np.ndarray, np.ndarray]:
         """``(K (3, 3), dist (5,) or (8,))`` as OpenCV expects them."""
@@ -330,8 +347,9 @@ class ThinLens:
     Parameters
     ----------
     aperture_m : entrance-pupil diameter ``A`` (metres, > 0); ``A = f / N`` for an f-number N.
-    focus_distance_m : depth ``d_f`` of the plane in focus (metres, > ``focal_length_m``).
-    focal_length_m : focal length ``f`` (metres, > 0), which only enters through
+    focus_distance_m : depth ``d_f`` of the plane in focus (metres, > ``focal_length_m``;
+        without one, > ``A / 2``: no lens is faster than f/0.5, :data:`MIN_F_NUMBER`).
+    focal_length_m : focal length ``f`` (metres, >= ``A / 2``), which only enters through
         ``d_f - f``; None treats it as negligible against ``d_f`` (``f << d_f``).
     """
 
@@ -340,14 +358,32 @@ class ThinLens:
     focal_length_m: float | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "aperture_m", positive("aperture_m", self.aperture_m))
+        aperture = positive("aperture_m", self.aperture_m)
+        object.__setattr__(self, "aperture_m", aperture)
         focus = positive("focus_distance_m", self.focus_distance_m)
         object.__setattr__(self, "focus_distance_m", focus)
+        # A lens focuses only beyond its focal length, and no lens is faster than f/0.5
+        # (numerical aperture 1): the focal length is at least half the aperture.
+        shortest = MIN_F_NUMBER * aperture
+        if self.focal_length_m is None and focus <= shortest:
+            raise InputError(
+                "focus_distance_m",
+                f"a focus distance beyond the focal length, which is at least {shortest:g} m "
+                f"for an aperture of {aperture:g} m (f/{MIN_F_NUMBER:g})",
+                self.focus_distance_m,
+            )
         if self.focal_length_m is not None:
             focal = positive("focal_length_m", self.focal_length_m)
             if focal >= focus:
                 raise InputError(
                     "focal_length_m", f"a focal length < the focus distance {focus}", focal
+                )
+            if focal < shortest:
+                raise InputError(
+                    "focal_length_m",
+                    f"at least {shortest:g} m for an aperture of {aperture:g} m "
+                    f"(f/{MIN_F_NUMBER:g}: no lens is faster)",
+                    focal,
                 )
             object.__setattr__(self, "focal_length_m", focal)
 

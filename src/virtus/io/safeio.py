@@ -34,6 +34,7 @@ import math
 import os
 import re
 import zipfile
+import zlib
 from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -246,21 +247,26 @@ def parse_json(
         number that overflows float64, a duplicate key, or the wrong top-level type.
     """
 
-    def no_constant(name: str) -> float:
+    refused: list[_Refused] = []  # found while parsing, reported with their key path after
+
+    def no_constant(name: str) -> Any:
         if allow_nan:
             return float(name)
-        raise InputError(what, "finite numbers (JSON has no NaN or Infinity)", name)
+        refused.append(_Refused(name, "finite numbers (JSON has no NaN or Infinity)"))
+        return refused[-1]
 
-    def finite_float(literal: str) -> float:
+    def finite_float(literal: str) -> Any:
         number = float(literal)
         if not (allow_nan or math.isfinite(number)):
-            raise InputError(what, "numbers within float64 range", literal)
+            refused.append(_Refused(literal, "numbers within float64 range"))
+            return refused[-1]
         return number
 
-    def bounded_int(literal: str) -> int:
+    def bounded_int(literal: str) -> Any:
         number = int(literal)
         if abs(number) > _FLOAT64_MAX:
-            raise InputError(what, "numbers within float64 range", literal)
+            refused.append(_Refused(literal, "numbers within float64 range"))
+            return refused[-1]
         return number
 
     def unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
@@ -291,7 +297,42 @@ def parse_json(
         if isinstance(error, InputError):
             raise
         raise InputError(what, "valid JSON", str(error).splitlines()[0]) from None
+    if refused:
+        key, number = _first_refused(value)
+        raise _in_key(InputError(what, number.expected, number.literal), key)
     return _check_kind(what, value, expect, _JSON_KINDS)
+
+
+class _Refused:
+    """A number :func:`parse_json` refuses (NaN, an overflow), left in the parsed value
+    until the key path that holds it is known."""
+
+    def __init__(self, literal: str, expected: str) -> None:
+        self.literal = literal
+        self.expected = expected
+
+
+def _first_refused(value: Any, key: str = "") -> tuple[str, Any]:
+    """``(key path, marker)`` of the first :class:`_Refused` in ``value`` (document order:
+    JSON objects keep it), e.g. ``("camera.dist[2]", marker)``; ``("", None)`` if none."""
+    if isinstance(value, _Refused):
+        return key, value
+    if not isinstance(value, dict | list):
+        return "", None
+    for name, item in value.items() if isinstance(value, dict) else enumerate(value):
+        step = f"[{name}]" if isinstance(name, int) else f".{name}" if key else str(name)
+        found = _first_refused(item, key + step)
+        if found[1] is not None:
+            return found
+    return "", None
+
+
+def _in_key(error: InputError, key: str) -> InputError:
+    """``error`` with the key path of the value at fault appended to its line (``... got
+    'NaN' in camera.dist[2]``); the file's name stays first."""
+    if key:
+        error.args = (f"{error.args[0]} in {key}",)
+    return error
 
 
 def read_json(
@@ -333,6 +374,7 @@ class _BoundedLoader(yaml.SafeLoader):
         self.depth = 0
         self.aliases = 0
         self.sizes: dict[int, int] = {}  # id(node) -> node count with aliases expanded
+        self.keys: list[str] = []  # the key path of the node being composed
 
     def _refuse(self, expected: str, got: str) -> InputError:
         mark = self.peek_event().start_mark
@@ -356,7 +398,15 @@ class _BoundedLoader(yaml.SafeLoader):
         self.depth += 1
         if self.depth > self.max_depth:
             raise self._refuse(f"YAML nested at most {self.max_depth} deep", "deeper nesting")
+        self.keys.append(
+            f"[{index}]" if isinstance(index, int)
+            else "" if not isinstance(index, yaml.ScalarNode)  # the root, or a key itself
+            else f".{index.value}" if any(self.keys) else str(index.value)
+        )  # fmt: skip
         node = super().compose_node(parent, index)
+        if isinstance(node, yaml.ScalarNode):
+            self._check_number(node)
+        self.keys.pop()
         self.depth -= 1
         if isinstance(node, yaml.MappingNode):
             _check_unique_yaml_keys(self.what, node)
@@ -374,6 +424,17 @@ class _BoundedLoader(yaml.SafeLoader):
             )
         self.sizes[id(node)] = size
         return node
+
+    def _check_number(self, node: yaml.ScalarNode) -> None:
+        """Refuse a non-finite float or an integer beyond float64, naming its key path."""
+        if node.tag == "tag:yaml.org,2002:float":
+            if not math.isfinite(yaml.SafeLoader.construct_yaml_float(self, node)):
+                error = InputError(self.what, "finite numbers", _at(node))
+                raise _in_key(error, "".join(self.keys))
+        elif node.tag == "tag:yaml.org,2002:int":
+            if abs(yaml.SafeLoader.construct_yaml_int(self, node)) > _FLOAT64_MAX:
+                error = InputError(self.what, "numbers within float64 range", _at(node))
+                raise _in_key(error, "".join(self.keys))
 
     def construct_yaml_float(self, node: Any) -> float:
         number = super().construct_yaml_float(node)
@@ -436,7 +497,10 @@ def parse_yaml(
         nesting deeper than ``max_depth``, a duplicate key, a non-finite float, or the wrong
         top-level type.
     """
-    loader = _BoundedLoader(text, what, max_depth)
+    try:
+        loader = _BoundedLoader(text, what, max_depth)
+    except yaml.YAMLError as error:  # the reader checks the characters at once (e.g. \x00)
+        raise InputError(what, "valid YAML", str(error).splitlines()[0]) from None
     try:
         value = loader.get_single_data()
     except yaml.MarkedYAMLError as error:
@@ -499,7 +563,7 @@ def load_npz(
         detail = str(error).removeprefix(f"{error.name}: ")
         raise _unreadable(path, what, f"{where}: {detail}" if where else detail) from None
     except (OSError, ValueError, KeyError, EOFError, NotImplementedError, RuntimeError,
-            MemoryError, zipfile.BadZipFile) as error:  # fmt: skip
+            MemoryError, zipfile.BadZipFile, zlib.error) as error:  # fmt: skip
         reason = str(error).splitlines()[0] if str(error) else type(error).__name__
         raise _unreadable(path, what, reason) from None
 

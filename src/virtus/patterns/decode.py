@@ -63,6 +63,7 @@ __all__ = [
     "PhaseSet",
     "assemble_result",
     "check_neighbours",
+    "check_saturation_level",
     "decode_code_only",
     "decode_frames",
     "runs_neighbour_check",
@@ -285,6 +286,7 @@ def decode_frames(
         integer = np.issubdtype(stack.dtype, np.integer)
         full_scale = float(np.iinfo(stack.dtype).max) if integer else 1.0
     full_scale = positive("full_scale", full_scale)
+    saturation_level = check_saturation_level(saturation_level, full_scale)
     if stack.max() > full_scale:
         # e.g. float frames in DN decoded with the default 1.0: the modulation threshold
         # would be meaningless, so refuse instead of passing every pixel.
@@ -333,6 +335,22 @@ def decode_frames(
         repaired=repaired,
         full_scale=full_scale,
     )
+
+
+def check_saturation_level(
+    level: object, full_scale: float, name: str = "saturation_level"
+) -> float | None:
+    """``level`` as a float in ``(0, full_scale]`` (None stays None: no saturation check),
+    or :class:`InputError` naming ``name``: a level of 0 or below would call every pixel
+    saturated, one above full scale none."""
+    if level is None:
+        return None
+    if isinstance(level, bool):
+        raise InputError(name, "a number", level)
+    value = finite(name, level)
+    if not 0.0 < value <= full_scale:
+        raise InputError(name, f"a level in (0, {full_scale:g}] (the frames' full scale)", level)
+    return value
 
 
 def runs_neighbour_check(plan: DecodePlan, neighbour_check: bool | None, repair: bool) -> bool:

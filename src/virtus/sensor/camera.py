@@ -27,7 +27,6 @@ from typing import Any, Literal
 
 import numpy as np
 
-from virtus.checks import positive
 from virtus.errors import InputError, VirtusError
 from virtus.io.safeio import check_keys
 from virtus.sensor.noise import LEGACY_NOISE_STREAMS, NOISE_STREAM, as_seed, standard_normal
@@ -118,24 +117,36 @@ class Sensor:
     name: str = "custom"
 
     def __post_init__(self) -> None:
-        if isinstance(self.bit_depth, bool) or self.bit_depth not in BIT_DEPTHS:
+        depth = self.bit_depth
+        if isinstance(depth, float) and depth.is_integer():
+            depth = int(depth)
+        if (
+            isinstance(depth, bool)
+            or not isinstance(depth, int | np.integer)
+            or depth not in BIT_DEPTHS
+        ):
             raise InputError("bit_depth", f"one of {BIT_DEPTHS}", self.bit_depth)
-        if self.exposure != "auto":
-            object.__setattr__(self, "exposure", positive("exposure", self.exposure))
-        if not 0 < self.auto_percentile <= 100:
-            raise InputError("auto_percentile", "a percentile in (0, 100]", self.auto_percentile)
-        if not 0 < self.auto_target <= 1:
-            raise InputError("auto_target", "a fraction in (0, 1]", self.auto_target)
-        eta = positive("quantum_efficiency", self.quantum_efficiency)
-        if eta > 1:
-            raise InputError("quantum_efficiency", "a fraction in (0, 1]", eta)
-        object.__setattr__(self, "quantum_efficiency", eta)
-        if self.system_gain_dn_per_e is not None:
-            gain = positive("system_gain_dn_per_e", self.system_gain_dn_per_e)
-            object.__setattr__(self, "system_gain_dn_per_e", gain)
-        if self.saturation_capacity_e is not None:
-            well = positive("saturation_capacity_e", self.saturation_capacity_e)
-            object.__setattr__(self, "saturation_capacity_e", well)
+        object.__setattr__(self, "bit_depth", int(depth))
+        if not (isinstance(self.exposure, str) and self.exposure == "auto"):
+            exposure = _real("exposure", self.exposure, '"auto" or a number > 0 (DN per radiance)')
+            if exposure <= 0:
+                raise InputError("exposure", '"auto" or a number > 0', self.exposure)
+            object.__setattr__(self, "exposure", exposure)
+        for name, low, high, what in (
+            ("auto_percentile", 0.0, 100.0, "a percentile in (0, 100]"),
+            ("auto_target", 0.0, 1.0, "a fraction in (0, 1]"),
+            ("quantum_efficiency", 0.0, 1.0, "a fraction in (0, 1]"),
+        ):
+            value = _real(name, getattr(self, name), what)
+            if not low < value <= high:
+                raise InputError(name, what, getattr(self, name))
+            object.__setattr__(self, name, value)
+        for name in ("system_gain_dn_per_e", "saturation_capacity_e"):
+            if getattr(self, name) is not None:
+                value = _real(name, getattr(self, name), "a number > 0 or null")
+                if value <= 0:
+                    raise InputError(name, "a number > 0 or null", getattr(self, name))
+                object.__setattr__(self, name, value)
         for name in ("dark_noise_e", "dark_current_e_per_s", "exposure_time_s", "dsnu_e",
                      "prnu", "black_level_dn"):  # fmt: skip
             object.__setattr__(self, name, _non_negative(name, getattr(self, name)))
@@ -145,7 +156,13 @@ class Sensor:
             raise InputError(
                 "black_level_dn", f"< full scale {self.full_scale}", self.black_level_dn
             )
-        object.__setattr__(self, "fixed_pattern_seed", as_seed(self.fixed_pattern_seed))
+        seed = self.fixed_pattern_seed
+        if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
+            raise InputError("fixed_pattern_seed", "an integer >= 0", seed)
+        try:
+            object.__setattr__(self, "fixed_pattern_seed", as_seed(seed))
+        except InputError as error:
+            raise InputError("fixed_pattern_seed", error.expected, error.got) from None
         if self.vignetting not in VIGNETTING:
             raise InputError("vignetting", f"one of {VIGNETTING}", self.vignetting)
         if not isinstance(self.name, str) or not self.name:
@@ -339,12 +356,25 @@ class Sensor:
         return dr.clip(dr.round(values), 0.0, float(self.full_scale))
 
 
+def _real(name: str, value: object, expected: str) -> float:
+    """``value`` as a float when it is a finite real number (an int or a float, not a bool,
+    a string or a list), else :class:`InputError` naming ``name`` and ``expected``."""
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+        raise InputError(name, expected, value)
+    try:
+        number = float(value)
+    except OverflowError:  # an int beyond float64
+        raise InputError(name, f"{expected} (finite)", value) from None
+    if not np.isfinite(number):
+        raise InputError(name, f"{expected} (finite)", value)
+    return number
+
+
 def _non_negative(name: str, value: object) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
+    number = _real(name, value, "a finite number >= 0")
+    if number < 0:
         raise InputError(name, "a finite number >= 0", value)
-    if value < 0:
-        raise InputError(name, "a finite number >= 0", value)
-    return float(value)
+    return number
 
 
 #: Named sensors for ``--sensor NAME``. ``ideal`` and ``paper`` are noise-free 8-bit sensors

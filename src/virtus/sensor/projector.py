@@ -65,13 +65,49 @@ def as_lookup(value: object) -> Lookup:
     return as_member(Lookup, "lookup", value)
 
 
+def _real(value: object) -> float | None:
+    """``value`` as a float when it is a finite real number (not a bool or a string)."""
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+        return None
+    try:
+        number = float(value)
+    except OverflowError:  # an int beyond float64
+        return None
+    return number if np.isfinite(number) else None
+
+
 def _number(name: str, value: object, low: float, high: float, *, open_low: bool = False) -> float:
     interval = f"{'(' if open_low else '['}{low}, {high}]"
-    if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
+    number = _real(value)
+    if number is None:
         raise InputError(name, f"a finite number in {interval}", value)
-    if value < low or value > high or (open_low and value == low):
+    if number < low or number > high or (open_low and number == low):
         raise InputError(name, f"a number in {interval}", value)
-    return float(value)
+    return number
+
+
+def _response_lut(value: object) -> tuple[float, ...]:
+    """A measured response table as 256 floats, or :class:`InputError` naming
+    ``response_lut`` and the entry at fault."""
+    expected = f"a list of {LEVELS + 1} non-decreasing numbers in [0, 1] ending at 1"
+    if isinstance(value, np.ndarray) and value.ndim == 1:
+        value = value.tolist()
+    if not isinstance(value, list | tuple):
+        raise InputError("response_lut", expected, value)
+    if len(value) != LEVELS + 1:
+        raise InputError("response_lut", expected, f"{len(value)} values")
+    table: list[float] = []
+    for index, item in enumerate(value):
+        number = _real(item)
+        if number is None or not 0.0 <= number <= 1.0:
+            raise InputError("response_lut", "finite numbers in [0, 1]", f"index {index}: {item}")
+        if table and number < table[-1]:
+            got = f"index {index}: {item} after {table[-1]}"
+            raise InputError("response_lut", "non-decreasing numbers", got)
+        table.append(number)
+    if abs(table[-1] - 1.0) > 1e-9:
+        raise InputError("response_lut", "1 as the light of level 255", f"index 255: {value[-1]}")
+    return tuple(table)
 
 
 @dataclass(frozen=True)
@@ -106,19 +142,7 @@ class ProjectorModel:
         object.__setattr__(self, "pixel", as_lookup(self.pixel))
         object.__setattr__(self, "gamma", _number("gamma", self.gamma, 0.0, 10.0, open_low=True))
         if self.response_lut is not None:
-            lut = np.asarray(self.response_lut, dtype=np.float64)
-            if (
-                lut.shape != (LEVELS + 1,)
-                or not np.all(np.isfinite(lut))
-                or np.any(np.diff(lut) < 0)
-                or lut[0] < 0
-                or abs(lut[-1] - 1.0) > 1e-9
-            ):
-                raise InputError(
-                    "response_lut", "256 non-decreasing values in [0, 1] ending at 1",
-                    f"{lut.shape[0] if lut.ndim == 1 else lut.shape} values",
-                )  # fmt: skip
-            object.__setattr__(self, "response_lut", tuple(float(x) for x in lut))
+            object.__setattr__(self, "response_lut", _response_lut(self.response_lut))
         if not isinstance(self.precompensate, bool):
             raise InputError("precompensate", "true or false", self.precompensate)
         if self.contrast_ratio is not None:
@@ -132,6 +156,8 @@ class ProjectorModel:
             raise InputError("pixel", '"psf" for a fill factor or a PSF width', self.pixel.value)
         if self.falloff not in FALLOFFS:
             raise InputError("falloff", f"one of {FALLOFFS}", self.falloff)
+        if not isinstance(self.name, str) or not self.name:
+            raise InputError("name", "a non-empty string", self.name)
 
     def with_(self, **changes: Any) -> ProjectorModel:
         """A copy with some parameters replaced (checked again)."""
@@ -153,10 +179,7 @@ class ProjectorModel:
     def from_dict(cls, data: object) -> ProjectorModel:
         """Inverse of :meth:`to_dict` (also a projector file's content); unknown keys refused."""
         check_keys(data, sorted(cls.__dataclass_fields__), "projector")
-        values = dict(data)  # type: ignore[call-overload]
-        if values.get("response_lut") is not None:
-            values["response_lut"] = tuple(values["response_lut"])
-        return cls(**values)
+        return cls(**dict(data))  # type: ignore[call-overload]
 
     # --- the response -------------------------------------------------------------------
 
