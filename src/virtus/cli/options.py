@@ -268,7 +268,10 @@ def parse_lens(text: str | None, option: str):  # noqa: ANN201
         aperture, focus = (float(part) for part in parts)
     except ValueError:
         raise InputError(option, "'APERTURE_M,FOCUS_M' (two numbers, metres)", text) from None
-    return ThinLens(aperture, focus)
+    try:
+        return ThinLens(aperture, focus)
+    except InputError as error:  # name the option the value came from
+        raise InputError(f"{option} {error.name}", error.expected, error.got) from None
 
 
 def build_scanner(

@@ -110,7 +110,12 @@ def register(app: typer.Typer) -> None:
         from rich.console import Console
 
         from virtus.errors import InputError
-        from virtus.pipeline.twin import VALIDATION_FILE, validate_twin, write_twin
+        from virtus.pipeline.twin import (
+            VALIDATION_FILE,
+            check_validation,
+            validate_twin,
+            write_twin,
+        )
 
         extra = list(more_captures or [])
         if extra and not (validate or fit):
@@ -125,6 +130,9 @@ def register(app: typer.Typer) -> None:
         fits = [*(fit or []), *(extra if not validate else [])]
         unit = None if units is None else units.value
         console = Console()
+        validated = [*validate, *(extra if not fit else [])] if validate else []
+        if validate:  # refuse bad validation inputs before the twin is written
+            check_validation(calibration, validated, board=board, units=unit)
         written = write_twin(
             calibration, out, meters_per_unit=meters_per_unit, units=unit, fit=fits or None,
             albedo=albedo, sensor=sensor, projector=projector,
@@ -135,7 +143,7 @@ def register(app: typer.Typer) -> None:
             return
         result = validate_twin(
             calibration,
-            [*validate, *(extra if not fit else [])],
+            validated,
             board=board,
             spp=spp,
             out=out / VALIDATION_FILE,

@@ -77,6 +77,7 @@ __all__ = [
     "TwinValidation",
     "compare_captures",
     "load_photometry",
+    "check_validation",
     "validate_twin",
     "write_photometry",
     "write_twin",
@@ -343,6 +344,44 @@ def compare_captures(
     return row
 
 
+def check_validation(
+    calibration: str | Path | Rig,
+    captures: list[str | Path | Capture],
+    *,
+    board: str | Board | None = None,
+    units: str | None = None,
+) -> None:
+    """The checks :func:`validate_twin` makes before it renders anything (the board known and
+    shown by the captures, the captures readable), so a job can refuse bad validation inputs
+    before it writes the twin. Raises what :func:`validate_twin` raises for them."""
+    _validation_inputs(calibration, captures, board, units)
+
+
+def _validation_inputs(
+    calibration: str | Path | Rig,
+    captures: list[str | Path | Capture],
+    board: str | Board | None,
+    units: str | None,
+) -> tuple[Rig, dict[str, Pose], Board, list[Any]]:
+    """The rig, the calibration's board poses by name, the board and the captures of a
+    validation, checked before anything is rendered."""
+    poses: dict[str, Pose] = {}
+    board_data = None
+    if isinstance(calibration, Rig):
+        rig = calibration
+    else:
+        rig = load_calibration(calibration, units=units)
+        poses, board_data = _board_poses(calibration)
+    if board is None and board_data is None:
+        raise InputError("board", "a board (the calibration file names none)", None)
+    the_board = board_from_spec(board) if board is not None else board_from_dict(board_data)
+    items: list[Any] = list(captures)
+    if items and all(isinstance(item, str | Path) for item in items):
+        items = capture_dirs(items)
+    _check_board(the_board, board_data, board, items)
+    return rig, poses, the_board, items
+
+
 def validate_twin(
     calibration: str | Path | Rig,
     captures: list[str | Path | Capture],
@@ -377,20 +416,7 @@ def validate_twin(
 
     light = load_photometry(twin) if isinstance(twin, str | Path) else twin
 
-    poses: dict[str, Pose] = {}
-    board_data = None
-    if isinstance(calibration, Rig):
-        rig = calibration
-    else:
-        rig = load_calibration(calibration, units=units)
-        poses, board_data = _board_poses(calibration)
-    if board is None and board_data is None:
-        raise InputError("board", "a board (the calibration file names none)", None)
-    the_board = board_from_spec(board) if board is not None else board_from_dict(board_data)
-    items: list[Any] = list(captures)
-    if items and all(isinstance(item, str | Path) for item in items):
-        items = capture_dirs(items)
-    _check_board(the_board, board_data, board, items)  # before anything is rendered
+    rig, poses, the_board, items = _validation_inputs(calibration, captures, board, units)
     blur = CHECKER_BLUR_M if the_board.TYPE == "checkerboard" else BOARD_BLUR_M
     texture = the_board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=blur)
     per_pose: list[dict[str, Any]] = []
