@@ -46,6 +46,15 @@ _SADDLE_RADIUS_PX = 2.0
 _SADDLE_ITERATIONS = 20
 #: Smallest blob area in px^2 (rejects specks) for the blob detector.
 _MIN_BLOB_AREA_PX = 12.0
+#: ``cv2.findChessboardCornersSB`` flags, tried in turn until the board is found. Its
+#: histogram equalisation (``NORMALIZE_IMAGE``) helps dim boards but turns the read noise
+#: of a dark background (0-1 DN in 8 bits: a 12-bit imx174 capture) into full-range
+#: speckle, where the detector then finds nothing (measured: 5 of 6 poses lost), so
+#: detection retries without it.
+_CHECKER_FLAGS = (
+    cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY | cv2.CALIB_CB_NORMALIZE_IMAGE,
+    cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY,
+)
 
 
 def _to_uint8(image: np.ndarray) -> np.ndarray:
@@ -178,11 +187,11 @@ def find_grid(image: np.ndarray, board: Board) -> np.ndarray | None:
         raise InputError("image", "a (H, W) grey image", f"{image.dtype} of shape {image.shape}")
     gray = _to_uint8(image)
     if isinstance(board, CheckerBoard):
-        found, corners = cv2.findChessboardCornersSB(
-            gray,
-            board.pattern_shape,
-            flags=cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY | cv2.CALIB_CB_NORMALIZE_IMAGE,
-        )
+        found, corners = False, None
+        for flags in _CHECKER_FLAGS:
+            found, corners = cv2.findChessboardCornersSB(gray, board.pattern_shape, flags=flags)
+            if found:
+                break
         if not found or corners is None or len(corners) != board.n_points:
             return None
         return order_to_board(board, corners.reshape(-1, 2).astype(np.float64), gray)
