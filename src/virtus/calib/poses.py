@@ -234,7 +234,9 @@ def check_pose_spread(poses: list[BoardPose]) -> None:
     The check uses the poses the boards were rendered in (the job knows them exactly). The
     solved poses cannot serve: with parallel boards the solve runs off to a wrong focal
     length whose board poses may tilt by anything (measured 0.06-130 deg), and OpenCV's
-    standard deviation of fx stays tiny there (measured 1e-12-1e-4 relative).
+    standard deviation of fx stays tiny there (measured 1e-12-1e-4 relative). Sets that pass
+    are checked again after the solve (:mod:`virtus.calib.conditioning`: a warning below a
+    10 deg spread, and the focal length's uncertainty from the solve's own Jacobian).
 
     Raises
     ------

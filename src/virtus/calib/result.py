@@ -2,9 +2,11 @@
 saved as (``calibration.json``, ``calibration.yaml``, ``paper_txt/``).
 
 ``calibration.json`` is the rig schema (metres, DESIGN.md section 3) plus the calibration
-fields of :meth:`CalibrationResult.to_dict`; ``calibration.yaml`` is the rig as OpenCV
-FileStorage YAML and ``paper_txt/*.txt`` the paper code's text files
-(:mod:`virtus.calib.io`). The calibration job (:mod:`virtus.pipeline.calibrate`) makes it.
+fields of :meth:`CalibrationResult.to_dict` (errors, poses, and how well the data determine
+the parameters: ``uncertainty`` and ``conditioning``, :mod:`virtus.calib.conditioning`);
+``calibration.yaml`` is the rig as OpenCV FileStorage YAML and ``paper_txt/*.txt`` the
+paper code's text files (:mod:`virtus.calib.io`). The calibration job
+(:mod:`virtus.pipeline.calibrate`) makes it.
 """
 
 from __future__ import annotations
@@ -55,25 +57,31 @@ class CalibrationResult:
     per_pose : per used pose: name, RMS per device, calibrated ``board2cam`` (from the
         joint refinement, consistent with ``rig``).
     truth_error : :func:`virtus.calib.truth.truth_error` against the true rig (or None).
-    board : the board.
+    board : the board (None: calibrated from correspondences with their own object points).
     poses : every pose that was captured (including dropped ones).
     dropped_poses : name -> reason.
     settings : how the episode ran (poses spec, spp, pixel model, sensor, seed, ...).
     true_rig : the rig that rendered the images, if known.
     timing_s : seconds spent by this process (``render_s``, ``observe_s``,
         ``calibrate_s``); not part of :meth:`to_dict`, which must not depend on the run.
+    uncertainty : standard deviations of the parameters
+        (:func:`~virtus.calib.conditioning.calibration_uncertainty`; empty if not computed).
+    conditioning : the conditioning check: values, levels, warnings
+        (:func:`~virtus.calib.conditioning.conditioning_report`; empty if not computed).
     """
 
     rig: Rig
     rms_px: dict[str, float]
     per_pose: list[dict[str, Any]]
     truth_error: dict[str, Any] | None
-    board: Board
+    board: Board | None
     poses: list[BoardPose]
     dropped_poses: dict[str, str] = field(default_factory=dict)
     settings: dict[str, Any] = field(default_factory=dict)
     true_rig: Rig | None = None
     timing_s: dict[str, float] = field(default_factory=dict)
+    uncertainty: dict[str, Any] = field(default_factory=dict)
+    conditioning: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         """The ``calibration.json`` content: rig schema (metres) + calibration fields."""
@@ -84,7 +92,7 @@ class CalibrationResult:
                 "paper_rms_px": PAPER_RMS_PX,
                 "per_pose": self.per_pose,
                 "dropped_poses": self.dropped_poses,
-                "board": self.board.to_dict(),
+                "board": None if self.board is None else self.board.to_dict(),
                 "poses": [p.to_dict() for p in self.poses],
                 "settings": self.settings,
             }
@@ -93,6 +101,9 @@ class CalibrationResult:
             data["truth_error"] = self.truth_error
         if self.true_rig is not None:
             data["true_rig"] = self.true_rig.to_dict()
+        for key in ("uncertainty", "conditioning"):
+            if getattr(self, key):
+                data[key] = getattr(self, key)
         return data
 
     def save(self, path: str | Path) -> Path:

@@ -106,6 +106,7 @@ if TYPE_CHECKING:
     from virtus.patterns import DecodeResult
 
 __all__ = [
+    "capture_dirs",
     "DECODED_DIR",
     "DECODED_FILES",
     "DECODED_SOURCE",
@@ -300,3 +301,34 @@ def check_points_current(capture: Capture, ply_path: str | Path) -> str:
             f"holds now; {again}"
         )
     return digest
+
+
+def capture_dirs(paths: list[str | Path]) -> list[Path]:
+    """Capture directories from paths that are capture directories (holding
+    ``capture.json``) or folders of them (their capture sub-directories, sorted by name).
+
+    Raises
+    ------
+    InputError : a path that is neither, or no capture at all.
+    """
+    from virtus.capture.capture import MANIFEST  # capture imports this module
+
+    out: list[Path] = []
+    for item in paths:
+        path = Path(item)
+        if (path / MANIFEST).is_file():
+            out.append(path)
+            continue
+        found = (
+            sorted(p for p in path.iterdir() if (p / MANIFEST).is_file()) if path.is_dir() else []
+        )
+        if not found:
+            raise InputError(
+                "captures",
+                f"capture directories (holding {MANIFEST}) or folders of them",
+                str(path),
+            )
+        out.extend(found)
+    if not out:
+        raise InputError("captures", "at least one capture directory", "none")
+    return out

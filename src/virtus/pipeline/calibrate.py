@@ -71,15 +71,18 @@ from typing import Any
 
 import numpy as np
 
+from virtus.calib import conditioning, points, solve
 from virtus.calib.board import Board, CheckerBoard, board_from_dict, board_from_spec
 from virtus.calib.observe import check_sequence, observe_arrays, observe_pose
+from virtus.calib.posefile import load_pose_observation, save_pose_arrays, save_pose_observation
 from virtus.calib.poses import BoardPose, check_pose, check_pose_spread, pose_set
 from virtus.calib.result import RESULT_FILES, CalibrationResult
 from virtus.calib.scene import BOARD_BLUR_M, BOARD_TEXEL_M, CHECKER_BLUR_M, board_scene
 from virtus.calib.solve import MIN_POSES, PoseObservation, calibrate_observations
 from virtus.calib.truth import truth_error
 from virtus.capture.capture import Capture
-from virtus.errors import InputError, VirtusError
+from virtus.capture.scandir import capture_dirs
+from virtus.errors import InputError
 from virtus.geometry.devices import Rig
 from virtus.io.runs import (
     RunDirectory,
@@ -87,15 +90,15 @@ from virtus.io.runs import (
     config_digest,
     directory_lock,
 )
-from virtus.io.safeio import load_npz, read_json
+from virtus.io.safeio import read_json
 from virtus.scanner import Scanner
 from virtus.sensor.noise import MAX_SEED, as_seed
 
 __all__ = [
     "MAX_RANDOM_POSES",
     "calibrate_captures",
+    "calibrate_points",
     "calibrate_rig",
-    "capture_dirs",
     "check_pose_spec",
     "recalibrate",
 ]
@@ -186,42 +189,6 @@ def pose_seed(seed: int, index: int) -> int:
     return int(state[0]) & MAX_SEED
 
 
-def _save_observation(
-    path: Path, *, pose: BoardPose, seed: int, episode: str, obs: PoseObservation
-) -> None:
-    arrays: dict[str, np.ndarray] = {
-        "board2cam": pose.board2cam.matrix,
-        "seed": np.array(seed, dtype=np.int64),
-        "episode": np.array(episode),
-    }
-    if obs.cam_centroids is not None:
-        arrays["cam_centroids"] = obs.cam_centroids
-    if obs.homographies is not None:
-        arrays["homographies"] = obs.homographies
-    np.savez(path, **arrays)
-
-
-def _load_observation(
-    path: Path, pose: BoardPose, seed: int | None, episode: str | None
-) -> PoseObservation:
-    """Read a pose file, checking it belongs to this pose (and episode, when given)."""
-    arrays = load_npz(path, "pose file")
-    board2cam = arrays.get("board2cam")
-    mismatch = None
-    if board2cam is None or not np.array_equal(board2cam, pose.board2cam.matrix):
-        mismatch = "another board pose"
-    elif seed is not None and int(arrays.get("seed", -1)) != seed:
-        mismatch = "another capture seed"
-    elif episode is not None and str(arrays.get("episode", "")) != episode:
-        mismatch = "another episode (scanner, board or poses)"
-    if mismatch:
-        raise VirtusError(
-            f"{path} was made for {mismatch} than this run's pose {pose.name!r}; remove it "
-            "or start again with --overwrite"
-        )
-    return PoseObservation(pose.name, arrays.get("cam_centroids"), arrays.get("homographies"))
-
-
 # -- the episode ----------------------------------------------------------------------------
 
 
@@ -288,20 +255,6 @@ def _episode(
     }
 
 
-@contextlib.contextmanager
-def _opencv_single_thread() -> Iterator[None]:
-    """Run OpenCV on one thread (reproducible sums: the result's last digits otherwise
-    depend on how its thread pool splits the work)."""
-    import cv2
-
-    previous = cv2.getNumThreads()
-    cv2.setNumThreads(1)
-    try:
-        yield
-    finally:
-        cv2.setNumThreads(previous)
-
-
 def _solve(
     episode: dict[str, Any],
     board: Board,
@@ -312,15 +265,17 @@ def _solve(
     start = time.perf_counter()
     true_rig = Rig.from_dict(episode["true_rig"])
     cam, prj = true_rig.camera.intrinsics, true_rig.projector.intrinsics
-    with _opencv_single_thread():
+    with solve.opencv_single_thread():
         solved = calibrate_observations(
             board,
             observations,
             (cam.width, cam.height),
             (prj.width, prj.height),
             fix_intrinsics=episode["settings"]["fix_intrinsics"],
+            distortion=episode["settings"].get("distortion", solve.DEFAULT_DISTORTION),
         )
     check_pose_spread([pose for pose in pose_list if pose.name in solved.used_poses])
+    conditioning.warn_conditioning(solved.conditioning)
     timing["calibrate_s"] = time.perf_counter() - start
     return CalibrationResult(
         rig=solved.rig,
@@ -333,6 +288,8 @@ def _solve(
         settings=episode["settings"],
         true_rig=true_rig,
         timing_s=timing,
+        uncertainty=solved.uncertainty,
+        conditioning=solved.conditioning,
     )
 
 
@@ -349,6 +306,7 @@ def calibrate_rig(
     fix_intrinsics: bool = False,
     check_poses: bool = True,
     processes: int | None = None,
+    distortion: str = solve.DEFAULT_DISTORTION,
 ) -> CalibrationResult:
     """Capture a board in every pose with ``scanner`` and calibrate its rig back.
 
@@ -374,6 +332,8 @@ def calibrate_rig(
         are then dropped with a warning).
     processes : worker processes that observe poses while the next render (0: in this
         process; default :func:`observe_processes`); the result does not depend on it.
+    distortion : the lens model of both devices (``"k1k2p1p2"``: k3 fixed at 0; ``"k3"``;
+        ``"rational"``: :data:`virtus.calib.solve.DISTORTION_MODELS`).
 
     Returns
     -------
@@ -400,6 +360,7 @@ def calibrate_rig(
     pose_list = _pose_list(poses, scanner.rig, board, seed, check_poses)
     check_pose_spread(pose_list)
     episode = _episode(scanner, board, pose_list, poses, seed, bool(fix_intrinsics))
+    episode["settings"].update(solve.distortion_setting(distortion))
     if out_dir is None:
         return _run_episode(scanner, board, pose_list, episode, progress, None, processes)
     config = {
@@ -409,6 +370,7 @@ def calibrate_rig(
         "seed": seed,
         "fix_intrinsics": bool(fix_intrinsics),
         "check_poses": bool(check_poses),
+        **solve.distortion_setting(distortion),
     }
     with claim_run(
         out_dir, COMMAND, config, layout=LAYOUT, overwrite=overwrite, resume=resume
@@ -452,7 +414,7 @@ def _run_episode(
         if run is not None:
             name = f"{POSE_DIR}/{pose.name}.npz"
             run.write(
-                name, partial(_save_observation, pose=pose, seed=seed, episode=digest, obs=obs)
+                name, partial(save_pose_observation, pose=pose, seed=seed, episode=digest, obs=obs)
             )
             run.log(f"rendered {pose.name}")
         if progress is not None:
@@ -466,7 +428,7 @@ def _run_episode(
             if run is not None and run.resumed and run.file(name).is_file():
                 while pending:
                     finish_oldest()
-                observations.append(_load_observation(run.file(name), pose, seed, digest))
+                observations.append(load_pose_observation(run.file(name), pose, seed, digest))
                 run.log(f"reused {pose.name}")
                 if progress is not None:
                     progress(index + 1, len(pose_list), pose.name)
@@ -495,7 +457,9 @@ def _timing_record(timing: dict[str, float]) -> dict[str, Any]:
     }
 
 
-def recalibrate(out_dir: str | Path, *, fix_intrinsics: bool | None = None) -> CalibrationResult:
+def recalibrate(
+    out_dir: str | Path, *, fix_intrinsics: bool | None = None, distortion: str | None = None
+) -> CalibrationResult:
     """Calibrate again from the observations a :func:`calibrate_rig` run saved.
 
     Uses ``out_dir/episode.json`` and every finished ``out_dir/poses/<name>.npz`` (poses
@@ -507,6 +471,7 @@ def recalibrate(out_dir: str | Path, *, fix_intrinsics: bool | None = None) -> C
     ----------
     out_dir : the ``out_dir`` of the run.
     fix_intrinsics : override the run's stereo option (default: as in the run).
+    distortion : override the run's lens model (:func:`calibrate_rig`; default: the run's).
 
     Raises
     ------
@@ -521,6 +486,9 @@ def recalibrate(out_dir: str | Path, *, fix_intrinsics: bool | None = None) -> C
         episode["settings"] = {k: v for k, v in episode["settings"].items() if k != "timing_s"}
         if fix_intrinsics is not None:
             episode["settings"]["fix_intrinsics"] = bool(fix_intrinsics)
+        if distortion is not None:
+            episode["settings"].pop("distortion", None)
+            episode["settings"].update(solve.distortion_setting(distortion))
         board = board_from_dict(episode["board"])
         seeds = episode.get("pose_seeds") or [None] * len(episode["poses"])
         pose_list, observations = [], []
@@ -533,7 +501,7 @@ def recalibrate(out_dir: str | Path, *, fix_intrinsics: bool | None = None) -> C
                 )
                 continue
             pose_list.append(pose)
-            observations.append(_load_observation(path, pose, seed, None))
+            observations.append(load_pose_observation(path, pose, seed, None))
         timing = {"render_s": 0.0, "observe_s": 0.0, "calibrate_s": 0.0}
         result = _solve(episode, board, pose_list, observations, timing)
         result.save(out_dir)
@@ -546,37 +514,6 @@ def recalibrate(out_dir: str | Path, *, fix_intrinsics: bool | None = None) -> C
 CAPTURES_COMMAND = "calibrate --captures"
 #: ``episode.json`` of a calibration from captures: the captures and the board.
 CAPTURES_LAYOUT = (*RESULT_FILES, EPISODE_FILE, TIMING_FILE, f"{POSE_DIR}/*.npz")
-
-
-def capture_dirs(paths: list[str | Path]) -> list[Path]:
-    """Capture directories from paths that are capture directories (holding
-    ``capture.json``) or folders of them (their capture sub-directories, sorted by name).
-
-    Raises
-    ------
-    InputError : a path that is neither, or no capture at all.
-    """
-    from virtus.capture.capture import MANIFEST
-
-    out: list[Path] = []
-    for item in paths:
-        path = Path(item)
-        if (path / MANIFEST).is_file():
-            out.append(path)
-            continue
-        found = (
-            sorted(p for p in path.iterdir() if (p / MANIFEST).is_file()) if path.is_dir() else []
-        )
-        if not found:
-            raise InputError(
-                "captures",
-                f"capture directories (holding {MANIFEST}) or folders of them",
-                str(path),
-            )
-        out.extend(found)
-    if not out:
-        raise InputError("captures", "at least one capture directory", "none")
-    return out
 
 
 def _check_captures(captures: list[Capture], names: list[str]) -> tuple[tuple[int, int], ...]:
@@ -609,6 +546,7 @@ def calibrate_captures(
     fix_intrinsics: bool = False,
     progress: Progress | None = None,
     processes: int | None = None,
+    distortion: str = solve.DEFAULT_DISTORTION,
 ) -> CalibrationResult:
     """Calibrate a rig from captures of a board, one capture of the whole sequence per pose.
 
@@ -623,14 +561,15 @@ def calibrate_captures(
     captures : capture directories (:meth:`Capture.load`; a folder of capture directories
         stands for them, sorted by name) or captures; a pose is named after its directory
         (``pose_NNN`` for an in-memory capture). Every capture must have the same sequence
-        (phase frames in both directions) and camera size; the projector size is the
-        sequence's. The captures' rigs are not used (the calibration is unknown).
+        (both directions: phase frames, or codes alone as OpenCV's ``GrayCodePattern``) and
+        camera size; the projector size is the sequence's. The captures' rigs are not used.
     board : a board or a spec (:func:`~virtus.calib.board.board_from_spec`).
     out_dir : if given, the run owns this directory and writes ``calibration.json``,
         ``calibration.yaml``, ``paper_txt/``, ``episode.json`` (the captures, the board),
         ``poses/<name>.npz`` (the observations) and ``timing.json``.
     overwrite : remove an earlier run's files in ``out_dir`` first.
     fix_intrinsics : keep single-device intrinsics in the stereo step.
+    distortion : the lens model (as :func:`calibrate_rig`).
     progress : called after each pose as ``progress(done, total, name)``.
     processes : worker processes that read, decode and observe the poses side by side
         (default :func:`observe_processes`; 0: one after the other, here). The files and the
@@ -675,6 +614,7 @@ def calibrate_captures(
         "projector_size": list(projector_size),
         "sequence": loaded[0].sequence.to_dict(),
         "fix_intrinsics": bool(fix_intrinsics),
+        **solve.distortion_setting(distortion),
     }
     if out_dir is None:
         return _run_captures(loaded, names, board, episode, progress, None, workers)
@@ -703,7 +643,7 @@ def _record_observed(run: RunDirectory | None, name: str, obs: PoseObservation) 
         for key, value in (("cam_centroids", obs.cam_centroids), ("homographies", obs.homographies))
         if value is not None
     }
-    run.write(f"{POSE_DIR}/{name}.npz", partial(_save_arrays, arrays=arrays))
+    run.write(f"{POSE_DIR}/{name}.npz", partial(save_pose_arrays, arrays=arrays))
     run.log(f"observed {name}")
 
 
@@ -744,13 +684,14 @@ def _run_captures(
             if progress is not None:
                 progress(index + 1, len(captures), name)
     start = time.perf_counter()
-    with _opencv_single_thread():
+    with solve.opencv_single_thread():
         solved = calibrate_observations(
             board,
             observations,
             tuple(episode["camera_size"]),  # type: ignore[arg-type]
             tuple(episode["projector_size"]),  # type: ignore[arg-type]
             fix_intrinsics=episode["fix_intrinsics"],
+            distortion=episode.get("distortion", solve.DEFAULT_DISTORTION),
         )
     poses = [
         BoardPose(p["name"], pose)
@@ -759,8 +700,9 @@ def _run_captures(
     # The true poses are unknown: the solved ones measure the spread (a degenerate set
     # solves to a wrong focal length, but its boards stay nearly parallel).
     check_pose_spread(poses)
+    conditioning.warn_conditioning(solved.conditioning)
     timing["calibrate_s"] = time.perf_counter() - start
-    settings = {k: v for k, v in episode.items() if k in ("source", "captures", "fix_intrinsics")}
+    settings = {k: v for k, v in episode.items() if k in ("source", "captures", *_SOLVER_KEYS)}
     settings.update(n_poses=len(captures), frames_per_pose=len(captures[0].sequence))
     result = CalibrationResult(
         rig=solved.rig,
@@ -772,6 +714,8 @@ def _run_captures(
         dropped_poses=solved.dropped_poses,
         settings=settings,
         timing_s=timing,
+        uncertainty=solved.uncertainty,
+        conditioning=solved.conditioning,
     )
     if run is not None:
         result.save(run.path)
@@ -779,5 +723,48 @@ def _run_captures(
     return result
 
 
-def _save_arrays(path: Path, arrays: dict[str, np.ndarray]) -> None:
-    np.savez(path, **arrays)
+# -- calibration from saved correspondences -------------------------------------------------
+
+#: The job's name in ``run.json`` when it calibrates from saved correspondences.
+POINTS_COMMAND = "calibrate --from-points"
+#: Solver options that calibrations from captures or points record in their settings.
+_SOLVER_KEYS = ("fix_intrinsics", "distortion")
+
+
+def calibrate_points(
+    source: str | Path,
+    *,
+    board: str | Board | None = None,
+    sizes: Any = None,
+    out_dir: str | Path | None = None,
+    overwrite: bool = False,
+    fix_intrinsics: bool = False,
+    distortion: str = solve.DEFAULT_DISTORTION,
+) -> CalibrationResult:
+    """Calibrate a rig from saved correspondences (``virtus calibrate --from-points``):
+    :func:`virtus.calib.points.read_points` reads ``source`` (layouts there), ``board`` and
+    ``sizes``; :meth:`~virtus.calib.points.PointSet.calibrate` solves, checks and warns. An
+    ``out_dir`` (not holding ``source``) gets :func:`calibrate_captures`'s files but the pose
+    files; other arguments and errors as there."""
+    solver = {"fix_intrinsics": bool(fix_intrinsics), **solve.distortion_setting(distortion)}
+    point_set = points.read_points(source, board=board, sizes=sizes)
+    config = {**point_set.describe(), **solver}
+    owned = (*RESULT_FILES, EPISODE_FILE, TIMING_FILE)
+    run_dir: Any = contextlib.nullcontext(None)
+    if out_dir is not None:
+        point_set.check_output(out_dir)
+        claim = partial(claim_run, inputs=point_set.inputs, layout=owned, overwrite=overwrite)
+        run_dir = claim(out_dir, POINTS_COMMAND, config)
+    with run_dir as run:
+        if run is not None:
+            run.own(*owned)
+            run.write_json(EPISODE_FILE, config)
+        start = time.perf_counter()
+        with solve.opencv_single_thread():
+            result = point_set.calibrate(**solver)
+        result.timing_s = {"render_s": 0.0, "observe_s": 0.0}
+        result.timing_s["calibrate_s"] = time.perf_counter() - start
+        if run is not None:
+            result.save(run.path)
+            run.write_json(TIMING_FILE, _timing_record(result.timing_s))
+        return result

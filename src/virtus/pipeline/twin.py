@@ -50,6 +50,7 @@ from virtus.calib.observe import observe_pose
 from virtus.calib.poses import BoardPose
 from virtus.calib.scene import BOARD_BLUR_M, BOARD_TEXEL_M, CHECKER_BLUR_M, board_scene
 from virtus.capture.capture import Capture
+from virtus.capture.scandir import capture_dirs
 from virtus.errors import InputError, VirtusError
 from virtus.geometry.devices import Rig
 from virtus.geometry.transforms import Pose
@@ -57,7 +58,6 @@ from virtus.io.jsonio import write_json
 from virtus.io.runs import atomic_write
 from virtus.io.safeio import read_json
 from virtus.metrology.plane import fit_plane
-from virtus.pipeline.calibrate import capture_dirs
 from virtus.reconstruct import points_from_decoded
 from virtus.scanner import Scanner
 from virtus.sensor.camera import Sensor, load_sensor
