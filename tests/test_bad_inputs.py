@@ -500,7 +500,7 @@ IMPORTS = [
                       (w / "images" / "img0.png").unlink())}, "img0.tif"),
     ("import-size", {"images": import_images(shape=(40, 40))}, "camera"),
     ("import-sequence-list", {"seq.json": "[]"}, "expected a mapping (sequence description)"),
-    ("import-sequence-deep", {"seq.json": "[" * 100 + "]" * 100}, "sequence description"),
+    ("import-sequence-deep", {"seq.json": "[" * 100 + "]" * 100}, "nested at most 64 deep"),
     ("import-calibration-list", {"rig.json": "[]"}, "expected a JSON object"),
     ("import-calibration-zero-baseline", {"rig.json": ZERO_BASELINE}, "baseline is 0 um"),
     ("import-calibration-misspelt", {"rig.json": rig(**{"camera.distortion": [0] * 5})},
