@@ -60,7 +60,7 @@ from virtus.geometry.transforms import Pose
 from virtus.io.images import frame_name, list_images, read_image, read_images, write_frames
 from virtus.io.jsonio import write_json
 from virtus.io.runs import atomic_write_files
-from virtus.io.safeio import load_npy, read_json
+from virtus.io.safeio import is_file, load_npy, read_json
 from virtus.patterns import DecodeResult, PatternSequence
 from virtus.sensor.camera import BIT_DEPTHS, Sensor
 
@@ -283,7 +283,7 @@ class Capture:
         if not self.gt_files:
             raise VirtusError(f"{self.path or 'capture'}: this capture has no ground truth")
         cam = self.rig.camera.intrinsics
-        missing = [path for path in self.gt_files.values() if not path.is_file()]
+        missing = [path for path in self.gt_files.values() if not is_file(path)]
         if missing:
             where, root = (self.path / MANIFEST, self.path) if self.path else ("capture", None)
             names = [p.relative_to(root).as_posix() if root else str(p) for p in missing[:3]]
@@ -454,10 +454,10 @@ class Capture:
         if not isinstance(gt_entry, dict):
             raise InputError(f"{manifest} gt", "an object of file names", gt_entry)
         gt_files = {str(k): _inside(directory, v, "gt") for k, v in gt_entry.items()}
-        missing = [str(p) for p in frame_files if not p.is_file()]
+        missing = [str(p) for p in frame_files if not is_file(p)]
         if missing:
             raise InputError(f"{manifest}", "the files it lists", f"missing {missing[:3]}")
-        if not any(path.is_file() for path in gt_files.values()):
+        if not any(is_file(path) for path in gt_files.values()):
             # ground truth removed (gt/ deleted to share the frames): a capture without it;
             # decoding and reconstruction need none. A part of it missing is a damaged
             # capture, refused when the ground truth is read.

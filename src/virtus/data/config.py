@@ -59,7 +59,7 @@ from pathlib import Path
 from typing import Any
 
 from virtus.errors import InputError
-from virtus.io.safeio import check_keys, read_yaml
+from virtus.io.safeio import check_keys, is_file, read_yaml
 
 __all__ = [
     "CODECS",
@@ -173,9 +173,11 @@ def _path(name: str, value: Any, base: Path | None, *, folder: bool = False) -> 
     path = Path(value).expanduser()
     if not path.is_absolute() and base is not None:
         path = base / path
-    path = path.resolve()
-    exists = path.is_dir() if folder else path.is_file()
-    if not exists:
+    try:
+        path = path.resolve()
+    except (OSError, ValueError, RuntimeError):  # a NUL byte, a symlink loop: no such file
+        raise InputError(name, f"an existing {'folder' if folder else 'file'}", value) from None
+    if not is_file(path, folder=folder):
         raise InputError(name, f"an existing {'folder' if folder else 'file'}", str(path))
     return path
 
@@ -451,7 +453,7 @@ class DatasetConfig:
 
         def member(table: Mapping[str, Any], what: str):  # noqa: ANN202
             def check(name: str, value: Any) -> str:
-                if value not in table:
+                if not isinstance(value, str) or value not in table:  # (a list: unhashable)
                     raise InputError(name, f"one of {', '.join(table)} ({what})", value)
                 return str(value)
 

@@ -107,6 +107,8 @@ def check_description(file: Path, data: dict[str, Any], storages: tuple[str, ...
         specs = [ArraySpec.from_dict(a) for a in layout]
         for spec in specs:
             np.dtype(spec.dtype)
+            if not isinstance(spec.name, str):
+                raise ValueError(f"name {spec.name!r}")
             if not all(isinstance(n, int) and n > 0 for n in spec.shape):
                 raise ValueError(f"shape {list(spec.shape)}")
     except (KeyError, TypeError, ValueError, AttributeError) as error:
@@ -134,12 +136,13 @@ def check_arrays(store: Path, layout: tuple[ArraySpec, ...], arrays: dict[str, A
     the layout's, naming the array's ``zarr.json``."""
     for spec in layout:
         array = arrays[spec.name]
-        if tuple(array.shape[1:]) != spec.shape or np.dtype(array.dtype) != spec.dtype:
+        shape = getattr(array, "shape", None)  # None: a group where the array should be
+        if shape is None or tuple(shape[1:]) != spec.shape or np.dtype(array.dtype) != spec.dtype:
             raise InputError(
                 f"{store / spec.name / 'zarr.json'}",
                 f"per-sample shape {list(spec.shape)} and dtype {spec.dtype} (the layout "
                 "of its dataset.json)",
-                f"shape {list(array.shape[1:])}, dtype {array.dtype}",
+                "a group" if shape is None else f"shape {list(shape[1:])}, dtype {array.dtype}",
             )
 
 

@@ -627,6 +627,9 @@ class DatasetStore:
             indices = [int(m["index"]) for m in metas]
             try:  # one read per array and shard (per-sample reads cost Zarr's overhead each)
                 blocks = self._read_block(min(indices), max(indices) + 1)
+                short = [n for n, b in blocks.items() if len(b) < max(indices) - min(indices) + 1]
+                if short:  # an array's zarr.json declares fewer samples than are recorded
+                    raise IndexError(f"{', '.join(short)} shorter than the records")
             except Exception as error:  # a damaged shard: zarr/numcodecs raise many types
                 problem = f"unreadable: {type(error).__name__}: {error}"
                 report.bad += [(index, problem) for index in indices]

@@ -76,7 +76,8 @@ def list_images(directory: str | Path) -> list[Path]:
 def image_size(path: str | Path) -> tuple[int, int]:
     """``(width, height)`` an image file's header declares, read without decoding anything.
 
-    PNG: the ``IHDR`` chunk (which must come first); BMP: the DIB header; TIFF (classic and
+    PNG: the ``IHDR`` chunk (which must come first), and every chunk's length must fit in
+    the file (:func:`_check_png_chunks`); BMP: the DIB header; TIFF (classic and
     BigTIFF, either byte order): ``ImageWidth``/``ImageLength`` of the first IFD. The format
     is told by the file's first bytes, not its suffix.
 
@@ -91,7 +92,9 @@ def image_size(path: str | Path) -> tuple[int, int]:
             size = os.fstat(stream.fileno()).st_size
             head = stream.read(32)
             if head.startswith(_PNG_SIGNATURE):
-                return _png_size(head, path)
+                width_height = _png_size(head, path)
+                _check_png_chunks(stream, size, path)
+                return width_height
             if head.startswith(b"BM"):
                 return _bmp_size(head, path)
             if head[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"):
@@ -116,6 +119,25 @@ def _png_size(head: bytes, path: Path) -> tuple[int, int]:
     if chunk != b"IHDR" or length != 13:
         raise InputError(str(path), "a PNG image starting with its IHDR chunk", "a corrupt header")
     return width, height
+
+
+def _check_png_chunks(stream: IO[bytes], size: int, path: Path) -> None:
+    """Refuse a PNG with a chunk whose declared length runs past the end of the file (up to
+    ``IEND``): OpenCV's decoder allocates what a chunk declares, gigabytes for a damaged
+    100-byte file. Only the 8-byte chunk headers are read (a seek per chunk)."""
+    offset = len(_PNG_SIGNATURE)
+    while offset + 8 <= size:  # a chunk: length, type, data, CRC (4 bytes)
+        stream.seek(offset)
+        length, kind = struct.unpack(">I4s", stream.read(8))
+        if offset + 12 + length > size:
+            raise InputError(
+                str(path), "a readable PNG image",
+                f"chunk {kind!r} at byte {offset} declaring {length:,} bytes, past the end "
+                f"of the {size:,}-byte file",
+            )  # fmt: skip
+        if kind == b"IEND":
+            return
+        offset += 12 + length
 
 
 def _bmp_size(head: bytes, path: Path) -> tuple[int, int]:

@@ -33,6 +33,8 @@ _PLY_TYPES = {
     "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
     "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
 }  # fmt: skip
+#: Types a list's length may have (integers).
+_PLY_COUNT_TYPES = tuple(name for name, code in _PLY_TYPES.items() if code[0] in "iu")
 _FORMATS = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": None}
 #: Largest PLY file read (bytes): it is read whole. 2 GiB hold a merged scan of 70 million
 #: points with normals and colours (27 bytes each).
@@ -212,6 +214,11 @@ def read_ply(path: str | os.PathLike[str]) -> PointCloud:
                 elements[-1][2].append((words[2], None, words[1]))
             else:
                 raise PlyError(f"{source}: bad property line {line!r}")
+            name, count_type, value_type = elements[-1][2][-1]
+            if value_type not in _PLY_TYPES or count_type not in (None, *_PLY_COUNT_TYPES):
+                raise PlyError(f"{source}: unknown PLY type in property line {line.strip()!r}")
+            if [p[0] for p in elements[-1][2]].count(name) > 1:
+                raise PlyError(f"{source}: property {name!r} twice in element {elements[-1][0]!r}")
     if fmt not in _FORMATS:
         raise PlyError(f"{source}: unknown PLY format {fmt!r}")
     vertex_index = next((i for i, e in enumerate(elements) if e[0] == "vertex"), None)

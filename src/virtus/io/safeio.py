@@ -55,6 +55,7 @@ __all__ = [
     "check_file",
     "check_keys",
     "closest_key",
+    "is_file",
     "load_npy",
     "load_npz",
     "parse_json",
@@ -130,8 +131,8 @@ def check_file(
         folder; ``<what> <path>: expected at most N bytes, got ...`` for a larger one.
     """
     path = Path(path)
-    if not path.is_file():
-        got = f"{path} (a folder)" if path.is_dir() else str(path)
+    if not is_file(path):
+        got = f"{path} (a folder)" if is_file(path, folder=True) else str(path)
         raise InputError(what, f"an existing {kind}", got)
     try:
         size = path.stat().st_size
@@ -142,6 +143,16 @@ def check_file(
             _label(what, path), f"a {kind} of at most {max_bytes:,} bytes", f"{size:,} bytes"
         )
     return path
+
+
+def is_file(path: str | os.PathLike[str], *, folder: bool = False) -> bool:
+    """``Path(path).is_file()`` (``is_dir()`` with ``folder``), False rather than an error
+    for a name the system cannot look up -- too long, holding a NUL byte, a symlink loop --
+    as a path read from a user's file may be."""
+    try:
+        return Path(path).is_dir() if folder else Path(path).is_file()
+    except (OSError, ValueError, RuntimeError):
+        return False
 
 
 def _read_bytes(path: Path, what: str) -> bytes:

@@ -166,7 +166,12 @@ def _uniform_order(white_black: bool | Sequence[str]) -> tuple[str, ...]:
     if isinstance(white_black, bool | np.bool_):
         return ("white", "black") if white_black else ()
     order = tuple(white_black) if isinstance(white_black, Sequence) else None
-    if isinstance(white_black, str) or order is None or sorted(order) != ["black", "white"]:
+    if (
+        isinstance(white_black, str)
+        or order is None
+        or not all(isinstance(kind, str) for kind in order)  # sorted() needs one type
+        or sorted(order) != ["black", "white"]
+    ):
         raise InputError(
             "white_black", "true, false, [white, black] or [black, white]", white_black
         )

@@ -455,8 +455,8 @@ def load_sequence_file(path: str | os.PathLike[str]) -> tuple[PatternSequence, l
     # the guarded parsers: nesting depth bounded before parsing (no RecursionError), YAML
     # aliases bounded, NaN/Infinity, overflowing numbers and duplicate keys refused
     if suffix == ".json":
-        data = parse_json(text, f"sequence {file}")
+        data = parse_json(text, f"sequence description {file}")
     else:
-        data = parse_yaml(text, f"sequence {file}")
+        data = parse_yaml(text, f"sequence description {file}")
     sequence = PatternSequence.from_dict(data)
     return sequence, _files(data, len(sequence))

@@ -70,7 +70,7 @@ from pydantic import (
 
 from virtus.errors import InputError, VirtusError
 from virtus.geometry.transforms import Pose
-from virtus.io.safeio import check_file, load_npy, read_yaml
+from virtus.io.safeio import check_file, is_file, load_npy, read_yaml
 from virtus.scene.meshfiles import check_mesh_file, load_mesh_file
 
 #: Largest length or coordinate a scene may hold, metres (1 km). Bench FPP scenes span
@@ -136,8 +136,9 @@ def _error_from_validation(error: ValidationError, prefix: str) -> InputError:
     got = first.get("input")
     if isinstance(got, np.ndarray):
         got = f"an array of shape {got.shape}"
-    if first["type"] == "extra_forbidden":
-        return InputError(loc, "no such key (unknown keys are rejected)", f"key {parts[-1]!r}")
+    if first["type"] == "extra_forbidden":  # (a key named like a union tag leaves no part)
+        key = parts[-1] if parts else str(first["loc"][-1]) if first["loc"] else ""
+        return InputError(loc, "no such key (unknown keys are rejected)", f"key {key!r}")
     if first["type"] == "missing":
         return InputError(loc, "this required key", "nothing")
     if first["type"] in ("union_tag_invalid", "union_tag_not_found"):
@@ -244,7 +245,10 @@ def _as_unit_image(name: str, value: Any) -> np.ndarray:
         isinstance(value, np.ndarray) and value.dtype == np.float64
         and not value.flags.writeable and value.flags.owndata
     )  # fmt: skip
-    array = value if reusable else np.array(value, dtype=np.float64)
+    try:
+        array = value if reusable else np.array(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):  # a mapping, ragged rows, text
+        raise InputError(name, "a (H, W) array of numbers in [0, 1]", value) from None
     if array.ndim != 2 or min(array.shape) < 1:
         raise InputError(name, "a (H, W) array", f"shape {array.shape}")
     if not np.all(np.isfinite(array)) or array.min() < 0 or array.max() > 1:
@@ -263,7 +267,7 @@ def _as_image_or_path(name: str, value: Any) -> Path | np.ndarray:
             raise InputError(
                 name, f"an image file ({', '.join(IMAGE_SUFFIXES)}) or .npy", str(path)
             )
-        if not path.is_file():
+        if not is_file(path):
             raise InputError(name, "an existing texture file", str(path))
         return path
     return _as_unit_image(name, value)
@@ -282,7 +286,18 @@ def load_texture(path: str | Path) -> np.ndarray:
         )
     import cv2
 
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    from virtus.io.images import IMAGE_SUFFIXES as CHECKED
+    from virtus.io.images import check_image_size, image_size, quiet_codecs
+
+    try:  # a PNG, TIFF or BMP header (told by its bytes) is checked before decoding
+        width, height = image_size(path)
+    except InputError:
+        if path.suffix.lower() in CHECKED:
+            raise
+    else:
+        check_image_size(path, width, height)
+    with quiet_codecs():
+        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if image is None:
         raise InputError(str(path), "an image OpenCV can read", "an unreadable file")
     if image.ndim == 3:
@@ -475,7 +490,7 @@ class MeshObject(_Posed):
         path = Path(value).expanduser()
         if path.suffix.lower() not in MESH_SUFFIXES:
             raise InputError("path", f"a mesh file ({', '.join(MESH_SUFFIXES)})", str(path))
-        if not path.is_file():
+        if not is_file(path):
             raise InputError("path", "an existing mesh file", str(path))
         try:
             check_file(path, "mesh", max_bytes=MAX_MESH_BYTES, kind="mesh file")
@@ -502,10 +517,15 @@ class MeshObject(_Posed):
         """
         path = check_file(self.path, "mesh", max_bytes=MAX_MESH_BYTES, kind="mesh file")
         mesh = load_mesh_file(path)  # checked against its header first (scene.meshfiles)
-        vertices = np.asarray(getattr(mesh, "vertices", ()), dtype=np.float64).reshape(-1, 3)
-        faces = np.asarray(getattr(mesh, "faces", ()), dtype=np.int64).reshape(-1, 3)
-        uv = getattr(getattr(mesh, "visual", None), "uv", None)
-        uv = None if uv is None or len(uv) != len(vertices) else np.asarray(uv, np.float64)
+        try:  # what trimesh made of a damaged file may not be (N, 3) numbers
+            vertices = np.asarray(getattr(mesh, "vertices", ()), dtype=np.float64).reshape(-1, 3)
+            faces = np.asarray(getattr(mesh, "faces", ()), dtype=np.int64).reshape(-1, 3)
+            uv = getattr(getattr(mesh, "visual", None), "uv", None)
+            uv = None if uv is None or len(uv) != len(vertices) else np.asarray(uv, np.float64)
+        except (ValueError, TypeError, OverflowError) as error:
+            raise InputError(
+                f"mesh {path}", "vertices of 3 coordinates and triangle faces", str(error)
+            ) from None
         _check_mesh(f"mesh {path}", vertices, faces, uv)
         world = self.pose.apply(vertices * self.scale_to_m)
         reach = float(np.abs(world).max())
@@ -743,6 +763,9 @@ class Scene(_Model):
         against ``base_dir``."""
         if not isinstance(data, Mapping):
             raise InputError("scene", "a mapping of scene keys", type(data).__name__)
+        odd = [key for key in data if not isinstance(key, str)]
+        if odd:  # YAML keys may be numbers or lists; keyword arguments must be names
+            raise InputError("scene", "keys that are names", f"key {odd[0]!r}")
         if base_dir is not None:
             data = _resolve_paths(data, Path(base_dir))
         return cls(**dict(data))

@@ -635,10 +635,19 @@ def _read_object(prim: Any, stage2scene: Pose, mpu: float, mesh_dir: Path) -> tu
     return MeshObject(file, (scale[0] if uniform else 1.0) * mpu, pose, Material(**keys)), role
 
 
+def _error_text(error: Any) -> str:
+    """``str(error)`` of a pxr error or diagnostic; one whose text is not UTF-8 (bytes of a
+    damaged file quoted in it) cannot be a str, and is named by its type instead."""
+    try:
+        return str(error)
+    except UnicodeError:
+        return f"{type(error).__name__} (its message is not UTF-8 text: a damaged file?)"
+
+
 def _composition_problem(error: Any) -> tuple[str, str]:
     """``(what, why)`` of a composition error (``Pcp.Error*``): ``("reference @asset@ of
     </Prim>", "not found")``, or USD's own words for other kinds."""
-    text = " ".join(str(error).split()).removesuffix("; skipping.").rstrip(".")
+    text = " ".join(_error_text(error).split()).removesuffix("; skipping.").rstrip(".")
     found = re.match(r"Could not load sublayer (@[^@]*@) of layer (@[^@]*@)", text)
     if found:
         return f"sublayer {found[1]} of {found[2]}", "not found"
@@ -670,7 +679,9 @@ def _open_stage(path: Path) -> Any:
             if errors and caught is not None:
                 caught.Clear()  # one line below says it
     except Exception as error:  # pxr raises Tf errors of its own types
-        raise InputError(f"stage {path}", "a USD stage usd-core can open", str(error)) from None
+        raise InputError(
+            f"stage {path}", "a USD stage usd-core can open", _error_text(error)
+        ) from None
     if stage is None:
         raise InputError(f"stage {path}", "a USD stage usd-core can open", "nothing")
     if errors:
@@ -683,6 +694,25 @@ def _open_stage(path: Path) -> Any:
     if not np.isfinite(mpu) or mpu <= 0:
         raise InputError(f"stage {path} metersPerUnit", "a positive number of metres", mpu)
     return stage
+
+
+@contextlib.contextmanager
+def _values_of(prim: Any) -> Any:
+    """Turn what a malformed attribute value makes numpy, Python or USD raise (a value USD
+    could not parse, ``Sdf.UnregisteredValue``; a missing value, ``None``; a wrong shape;
+    an xform op USD refuses, ``Tf.ErrorException``) into an :class:`InputError` naming the
+    prim."""
+    try:
+        yield
+    except VirtusError:
+        raise
+    except (TypeError, ValueError, IndexError, KeyError, AttributeError, OverflowError,
+            ZeroDivisionError, RuntimeError) as error:  # fmt: skip
+        where = f"prim {prim.GetPath()}" if prim is not None else "stage"
+        text = _error_text(error).strip()
+        got = text.splitlines()[0][:200] if text else type(error).__name__
+        expected = "attribute values of the types and shapes USD defines"
+        raise InputError(where, expected, got) from None
 
 
 def read_usd(path: str | Path) -> UsdContents:
@@ -708,11 +738,12 @@ def read_usd(path: str | Path) -> UsdContents:
     cameras = [p for p in prims if p.IsA(UsdGeom.Camera)]
     camera = cam2stage = None
     if cameras:
-        cam2stage = _device2stage(cameras[0], mpu)
-        try:
-            camera = usd_camera_intrinsics(cameras[0])
-        except InputError:  # a pinhole camera without image size: its pose still counts
-            camera = None
+        with _values_of(cameras[0]):
+            cam2stage = _device2stage(cameras[0], mpu)
+            try:
+                camera = usd_camera_intrinsics(cameras[0])
+            except InputError:  # a pinhole camera without image size: its pose still counts
+                camera = None
     projectors = [
         p
         for p in prims
@@ -720,13 +751,14 @@ def read_usd(path: str | Path) -> UsdContents:
         and p.GetAttribute("isProjector").Get()
     ]  # fmt: skip
     rig = None
-    if camera is not None and projectors and _opencv_attrs(projectors[0]) is not None:
-        proj2stage = _device2stage(projectors[0], mpu)
-        rig = Rig(
-            Camera(camera),
-            Projector(_opencv_attrs(projectors[0])),  # type: ignore[arg-type]
-            cam2stage.inverse() @ proj2stage,  # type: ignore[union-attr]
-        )
+    with _values_of(projectors[0] if projectors else None):
+        if camera is not None and projectors and _opencv_attrs(projectors[0]) is not None:
+            proj2stage = _device2stage(projectors[0], mpu)
+            rig = Rig(
+                Camera(camera),
+                Projector(_opencv_attrs(projectors[0])),  # type: ignore[arg-type]
+                cam2stage.inverse() @ proj2stage,  # type: ignore[union-attr]
+            )
     stage2scene = cam2stage.inverse() if cam2stage is not None else Pose.identity()
     mesh_dir = path.parent / f"{path.stem}_meshes"
     objects, background = [], None
@@ -737,7 +769,8 @@ def read_usd(path: str | Path) -> UsdContents:
             continue
         if UsdGeom.Imageable(prim).ComputeVisibility() == UsdGeom.Tokens.invisible:
             continue
-        obj, role = _read_object(prim, stage2scene, mpu, mesh_dir)
+        with _values_of(prim):
+            obj, role = _read_object(prim, stage2scene, mpu, mesh_dir)
         if role == "background" and background is None:
             background = obj
         else:
@@ -747,7 +780,8 @@ def read_usd(path: str | Path) -> UsdContents:
         world = stage.GetDefaultPrim()
         ambient = 0.0
         if world and world.HasAttribute("virtus:ambient"):
-            ambient = float(world.GetAttribute("virtus:ambient").Get())
+            with _values_of(world):
+                ambient = float(world.GetAttribute("virtus:ambient").Get())
         scene = Scene(objects=tuple(objects), background=background, ambient=ambient)
     return UsdContents(scene, camera, cam2stage, rig, mpu)
 
