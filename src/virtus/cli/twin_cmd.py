@@ -8,8 +8,16 @@ from typing import Annotated, Any
 
 import typer
 
-from virtus.cli.options import UnitsOption
+from virtus.cli.options import CameraSizeOption, PixelSizeOption, UnitsOption, parse_size
 
+ProjectorSizeOption = Annotated[
+    str | None,
+    typer.Option(
+        "--projector-size",
+        metavar="W,H",
+        help="Projector image size 'W,H' in pixels, for a calibration file that states none.",
+    ),
+]
 FitOption = Annotated[
     list[Path] | None,
     typer.Option(
@@ -99,6 +107,9 @@ def register(app: typer.Typer) -> None:
         ] = 1.0,
         spp: Annotated[int, typer.Option(help="Supersamples of the twin renders.")] = 1,
         units: UnitsOption = None,
+        camera_size: CameraSizeOption = None,
+        projector_size: ProjectorSizeOption = None,
+        pixel_size_um: PixelSizeOption = None,
     ) -> None:
         """Write OUT/rig.json, OUT/isaac.json (Isaac Sim parameters in USD's convention:
         lens and film values in tenths of a scene unit, metersPerUnit, lens distortion,
@@ -133,9 +144,14 @@ def register(app: typer.Typer) -> None:
         validated = [*validate, *(extra if not fit else [])] if validate else []
         if validate:  # refuse bad validation inputs before the twin is written
             check_validation(calibration, validated, board=board, units=unit)
+        if pixel_size_um is not None and not 0 < pixel_size_um < 1000:  # NaN fails too
+            raise InputError("--pixel-size-um", "a pixel pitch in (0, 1000) um", pixel_size_um)
+        pitch = {} if pixel_size_um is None else {"pixel_size_m": pixel_size_um * 1e-6}
         written = write_twin(
             calibration, out, meters_per_unit=meters_per_unit, units=unit, fit=fits or None,
             albedo=albedo, sensor=sensor, projector=projector,
+            camera_size=parse_size(camera_size),
+            projector_size=parse_size(projector_size, "--projector-size"), **pitch,
         )  # fmt: skip
         for path in written.values():
             console.print(f"wrote {path}")

@@ -51,6 +51,7 @@ from virtus.calib.poses import BoardPose
 from virtus.calib.scene import BOARD_BLUR_M, BOARD_TEXEL_M, CHECKER_BLUR_M, board_scene
 from virtus.capture.capture import Capture
 from virtus.capture.scandir import capture_dirs
+from virtus.checks import positive
 from virtus.errors import InputError, VirtusError
 from virtus.geometry.devices import Rig
 from virtus.geometry.transforms import Pose
@@ -106,6 +107,8 @@ def write_twin(
     meters_per_unit: float = 1.0,
     pixel_size_m: float = DEFAULT_PIXEL_SIZE_M,
     units: str | None = None,
+    camera_size: tuple[int, int] | None = None,
+    projector_size: tuple[int, int] | None = None,
     fit: list[str | Path | Capture] | None = None,
     albedo: float = 1.0,
     sensor: str | Path | Sensor | None = None,
@@ -114,10 +117,16 @@ def write_twin(
     """Write the twin of a calibration (module docstring); returns name -> path written.
 
     ``calibration``: any file :func:`virtus.calib.io.load_calibration` reads (``units`` for
-    files that state none). With ``fit`` (captures), the twin's light too
+    files that state none; ``camera_size``/``projector_size``, ``(width, height)`` px, for
+    files that state no image sizes, e.g. the paper code's text folders). ``pixel_size_m``:
+    the real camera's pixel pitch, which sets the USD lens and film values (default: the
+    paper's Isaac camera). With ``fit`` (captures), the twin's light too
     (:func:`write_photometry` with ``albedo``, ``sensor`` and ``projector``).
     """
-    rig = load_calibration(calibration, units=units)
+    positive("pixel_size_m", pixel_size_m)  # before anything is written
+    rig = load_calibration(
+        calibration, units=units, camera_size=camera_size, projector_size=projector_size
+    )
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     written = {"rig": rig.save_json(out / RIG_FILE)}
