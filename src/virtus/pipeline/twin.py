@@ -12,7 +12,7 @@ pose is rendered again with the twin -- a :class:`~virtus.scanner.Scanner` built
 twin rig and the captures' sequence, resolution and bit depth, the board placed by the
 calibration's own extrinsics (``per_pose[*].board2cam`` of ``calibration.json``, matched by
 pose name; a pose the file lacks is placed by ``cv2.solvePnP`` of its detected points with
-the twin camera) -- and both captures are decoded and compared:
+the twin camera) -- and both captures are decoded (with fringe-order repair) and compared:
 
 * ``centre_diff_px``: board point (circle centre / corner) positions, real minus virtual,
   mean and max of the distances, px;
@@ -331,7 +331,8 @@ def compare_captures(
         diff = np.linalg.norm(obs_real.cam_centroids - obs_virtual.cam_centroids, axis=1)
         row["centre_diff_mean_px"] = float(np.nanmean(diff))
         row["centre_diff_max_px"] = float(np.nanmax(diff))
-    dec_real, dec_virtual = real.decode(), virtual.decode()
+    # Repaired fringe orders on both sides: a real frame's order errors are not the twin's.
+    dec_real, dec_virtual = real.decode(repair=True), virtual.decode(repair=True)
     both = dec_real.mask & dec_virtual.mask & _on_board(rig, board, board2cam)
     delta = dec_real.proj_uv[both] - dec_virtual.proj_uv[both]
     distance_uv = np.sqrt(np.sum(delta**2, axis=1))
