@@ -8,7 +8,6 @@ Stores are tiny (4 samples of a 64 x 48 camera, 2 shards of 2 samples): about a 
 
 from __future__ import annotations
 
-import hashlib
 import json
 import shutil
 import socket
@@ -16,54 +15,20 @@ import tarfile
 from pathlib import Path
 
 import pytest
-import yaml
 
-from virtus.cli import main
+from tests.data.test_dataset import run_cli, store_files
+from tests.data.test_dataset import tiny_config as shared_config
 from virtus.data import DamagedSample, DatasetStore, FringeDataset, generate, load_config
 from virtus.data.export import export_webdataset
 from virtus.errors import InputError, RunConflict
-from virtus.geometry.devices import Camera, Projector, Rig, default_rig
-from virtus.geometry.optics import Intrinsics
 from virtus.io.runs import config_digest
 
 
 def tiny_config(folder: Path, name: str = "config.yaml", **changes) -> Path:
-    """A tiny training configuration ``folder/name`` (as tests/data/test_dataset.py's)."""
-    folder.mkdir(parents=True, exist_ok=True)
-    rig = default_rig()
-    camera = Intrinsics(152.4, 152.4, 31.5, 23.5, 64, 48)
-    Rig(Camera(camera), Projector(rig.projector.intrinsics.scaled(0.25)), rig.proj2cam).save_json(
-        folder / "rig.json"
+    """The dataset tests' tiny configuration, 4 samples in shards of 2."""
+    return shared_config(
+        folder, name, **{"num_samples": 4, "storage": {"shard_samples": 2}, **changes}
     )
-    data = {
-        "mode": "training",
-        "seed": 11,
-        "num_samples": 4,
-        "rig": {"file": "rig.json"},
-        "fringes": {"codings": ["gray"], "steps": [4], "periods": [16]},
-        "objects": {"sources": [{"type": "sphere", "radius_m": [0.04, 0.08], "instances": 12}]},
-        "storage": {"shard_samples": 2},
-    }
-    data.update(changes)
-    path = folder / name
-    path.write_text(yaml.safe_dump(data))
-    return path
-
-
-def store_files(path: Path) -> dict[str, str]:
-    """Relative path -> sha256 of every file under ``path`` (the lock file aside)."""
-    return {
-        p.relative_to(path).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
-        for p in sorted(path.rglob("*"))
-        if p.is_file() and p.name != ".virtus.lock"
-    }
-
-
-def run_cli(args: list[str], capsys) -> tuple[int, str, str]:
-    with pytest.raises(SystemExit) as exit_info:
-        main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    return exit_info.value.code, out, err
 
 
 def refused(args: list[str], capsys, *culprits: str) -> str:

@@ -52,8 +52,8 @@ def tiny_rig() -> Rig:
     return Rig(Camera(camera), Projector(rig.projector.intrinsics.scaled(0.25)), rig.proj2cam)
 
 
-def tiny_config(folder: Path, **changes) -> Path:
-    """Write a tiny training configuration into ``folder``; ``changes`` update its keys."""
+def tiny_config(folder: Path, name: str = "config.yaml", **changes) -> Path:
+    """Write a tiny training configuration ``folder/name``; ``changes`` update its keys."""
     folder.mkdir(parents=True, exist_ok=True)
     tiny_rig().save_json(folder / "rig.json")
     data = {
@@ -66,7 +66,7 @@ def tiny_config(folder: Path, **changes) -> Path:
         "storage": {"shard_samples": 4},
     }
     data.update(changes)
-    path = folder / "config.yaml"
+    path = folder / name
     path.write_text(yaml.safe_dump(data))
     return path
 
@@ -82,7 +82,7 @@ def store_files(path: Path) -> dict[str, str]:
 
 def run_cli(args: list[str], capsys) -> tuple[int, str, str]:
     with pytest.raises(SystemExit) as exit_info:
-        main(args)
+        main([str(a) for a in args])
     out, err = capsys.readouterr()
     return exit_info.value.code, out, err
 
