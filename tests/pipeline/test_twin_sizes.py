@@ -42,18 +42,7 @@ def test_a_folder_without_a_camera_size_needs_camera_size(folder, tmp_path, caps
 
 def test_the_pixel_size_sets_the_usd_focal_length(folder, tmp_path, capsys) -> None:
     out = tmp_path / "twin"
-    argv = [
-        "twin",
-        folder,
-        "--out",
-        out,
-        "--camera-size",
-        "960,960",
-        "--projector-size",
-        "912,1140",
-        "--pixel-size-um",
-        "3.45",
-    ]
+    argv = ["twin", folder, "--out", out, *SIZES, "--pixel-size-um", "3.45"]
     code, err = _twin(argv, capsys)
     assert code in (0, None), err
     usd = json.loads((out / "isaac.json").read_text())["camera"]["usd"]
@@ -64,18 +53,7 @@ def test_the_pixel_size_sets_the_usd_focal_length(folder, tmp_path, capsys) -> N
 @pytest.mark.parametrize("value", ["0", "-3", "nan"])
 def test_a_bad_pixel_size_is_one_line_and_writes_nothing(folder, tmp_path, capsys, value):
     out = tmp_path / "twin"
-    argv = [
-        "twin",
-        folder,
-        "--out",
-        out,
-        "--camera-size",
-        "960,960",
-        "--projector-size",
-        "912,1140",
-        "--pixel-size-um",
-        value,
-    ]
+    argv = ["twin", folder, "--out", out, *SIZES, "--pixel-size-um", value]
     code, err = _twin(argv, capsys)
     assert code == 2 and err.count("\n") == 1 and "--pixel-size-um" in err, err
     assert not out.exists()
