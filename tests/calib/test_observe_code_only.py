@@ -11,11 +11,14 @@ import pytest
 
 from tests import tolerances as tol
 from tests.pipeline.test_calibrate_resume import quarter_rig
-from virtus.calib.board import CheckerBoard, board_from_spec
+from virtus.calib.board import board_from_spec
 from virtus.calib.observe import check_sequence, observe_pose, uniform_image
 from virtus.calib.poses import pose_set
 from virtus.calib.projector import apply_homographies
-from virtus.calib.scene import BOARD_BLUR_M, BOARD_TEXEL_M, CHECKER_BLUR_M, board_scene
+from virtus.calib.scene import (
+    board_scene,
+    board_texture,
+)
 from virtus.errors import InputError
 from virtus.patterns import PatternSequence, default_sequence, opencv_graycode_sequence
 from virtus.render import RenderSettings
@@ -56,8 +59,7 @@ def projector_point_errors(
     the true camera points, minus the true projector points; and the same read from the
     decoded map at the nearest camera pixel (what a homography averages away)."""
     board = board_from_spec(spec)
-    blur = CHECKER_BLUR_M if isinstance(board, CheckerBoard) else BOARD_BLUR_M
-    texture = board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=blur)
+    texture = board_texture(board)
     scanner = Scanner(
         rig=RIG,
         sequence=sequence,

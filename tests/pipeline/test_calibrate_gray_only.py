@@ -18,9 +18,12 @@ import pytest
 
 from tests import tolerances as tol
 from tests.pipeline.test_calibrate_captures import _export_png_folder, _run_cli, scaled_rig
-from virtus.calib.board import Board, CheckerBoard, board_from_spec
+from virtus.calib.board import Board, board_from_spec
 from virtus.calib.poses import pose_set
-from virtus.calib.scene import BOARD_BLUR_M, BOARD_TEXEL_M, CHECKER_BLUR_M, board_scene
+from virtus.calib.scene import (
+    board_scene,
+    board_texture,
+)
 from virtus.calib.truth import truth_error
 from virtus.capture.capture import import_capture
 from virtus.geometry.devices import Rig
@@ -58,8 +61,7 @@ def _uniform() -> list[dict[str, str]]:
 
 def bench(tmp_path: Path, sequence: PatternSequence, board: Board) -> Path:
     """Capture directories of ``POSES`` board poses (PNG folders imported as a bench's)."""
-    blur = CHECKER_BLUR_M if isinstance(board, CheckerBoard) else BOARD_BLUR_M
-    texture = board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=blur)
+    texture = board_texture(board)
     scanner = Scanner(
         rig=RIG,
         sequence=sequence,

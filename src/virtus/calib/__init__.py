@@ -59,7 +59,13 @@ from virtus.calib.poses import (
     random_poses,
 )
 from virtus.calib.result import CalibrationResult
-from virtus.calib.scene import BOARD_BLUR_M, BOARD_TEXEL_M, CHECKER_BLUR_M, board_scene
+from virtus.calib.scene import (
+    BOARD_BLUR_M,
+    BOARD_TEXEL_M,
+    CHECKER_BLUR_M,
+    board_scene,
+    board_texture,
+)
 from virtus.calib.solve import (
     DISTORTION_MODELS,
     PoseObservation,
@@ -84,6 +90,7 @@ __all__ = [
     "PoseObservation",
     "board_from_spec",
     "board_scene",
+    "board_texture",
     "calibrate_correspondences",
     "calibrate_observations",
     "calibration_uncertainty",

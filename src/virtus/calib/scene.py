@@ -4,7 +4,7 @@ texture is made (the circles' and squares' edge softening, the texel size).
 The calibration job (:mod:`virtus.pipeline.calibrate`), the twin validation and the
 dataset's calibration mode render the board through :func:`board_scene` with a texture
 from ``board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=...)``, :data:`BOARD_BLUR_M` for
-circle boards and :data:`CHECKER_BLUR_M` for checkerboards.
+circle boards and :data:`CHECKER_BLUR_M` for checkerboards (:func:`board_texture`).
 """
 
 from __future__ import annotations
@@ -13,10 +13,10 @@ from typing import Any
 
 import numpy as np
 
-from virtus.calib.board import Board
+from virtus.calib.board import Board, CheckerBoard
 from virtus.calib.poses import BoardPose
 
-__all__ = ["BOARD_BLUR_M", "BOARD_TEXEL_M", "CHECKER_BLUR_M", "board_scene"]
+__all__ = ["BOARD_BLUR_M", "BOARD_TEXEL_M", "CHECKER_BLUR_M", "board_scene", "board_texture"]
 
 #: Gaussian softening (m, board plane) of the printed circles' edges, like slight lens
 #: defocus: with 4 spp the centroid error falls from ~0.005 px to ~0.001 px (measured on
@@ -28,6 +28,13 @@ BOARD_BLUR_M = 2e-4
 CHECKER_BLUR_M = 1e-3
 #: Texel size (m) of the board texture: about a quarter of a camera pixel at 0.9 m.
 BOARD_TEXEL_M = 1e-4
+
+
+def board_texture(board: Board) -> np.ndarray:
+    """The board's printed texture, (H, W) in [0, 1] at :data:`BOARD_TEXEL_M`, its edges
+    softened by :data:`CHECKER_BLUR_M` for a checkerboard, else :data:`BOARD_BLUR_M`."""
+    blur = CHECKER_BLUR_M if isinstance(board, CheckerBoard) else BOARD_BLUR_M
+    return board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=blur)
 
 
 def board_scene(board: Board, pose: BoardPose, texture: np.ndarray) -> Any:

@@ -72,12 +72,17 @@ from typing import Any
 import numpy as np
 
 from virtus.calib import conditioning, points, solve
-from virtus.calib.board import Board, CheckerBoard, board_from_dict, board_from_spec
+from virtus.calib.board import Board, board_from_dict, board_from_spec
 from virtus.calib.observe import check_sequence, observe_arrays, observe_pose
 from virtus.calib.posefile import load_pose_observation, save_pose_arrays, save_pose_observation
 from virtus.calib.poses import BoardPose, check_pose, check_pose_spread, pose_set
 from virtus.calib.result import RESULT_FILES, CalibrationResult
-from virtus.calib.scene import BOARD_BLUR_M, BOARD_TEXEL_M, CHECKER_BLUR_M, board_scene
+from virtus.calib.scene import (
+    BOARD_BLUR_M,
+    BOARD_TEXEL_M,
+    board_scene,
+    board_texture,
+)
 from virtus.calib.solve import MIN_POSES, PoseObservation, calibrate_observations
 from virtus.calib.truth import truth_error
 from virtus.capture.capture import Capture
@@ -387,10 +392,9 @@ def _run_episode(
     run: RunDirectory | None,
     processes: int | None = None,
 ) -> CalibrationResult:
-    blur = CHECKER_BLUR_M if isinstance(board, CheckerBoard) else BOARD_BLUR_M
     # One read-only float64 image for every pose: the scenes share it, and the renderer
     # its texture.
-    texture = np.array(board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=blur), dtype=np.float64)
+    texture = np.array(board_texture(board), dtype=np.float64)
     texture.setflags(write=False)
     digest = config_digest(episode)
     timing = {"render_s": 0.0, "observe_s": 0.0, "calibrate_s": 0.0}

@@ -48,7 +48,10 @@ from virtus.calib.board import Board, board_from_dict, board_from_spec
 from virtus.calib.io import load_calibration
 from virtus.calib.observe import observe_pose
 from virtus.calib.poses import BoardPose
-from virtus.calib.scene import BOARD_BLUR_M, BOARD_TEXEL_M, CHECKER_BLUR_M, board_scene
+from virtus.calib.scene import (
+    board_scene,
+    board_texture,
+)
 from virtus.capture.capture import Capture
 from virtus.capture.scandir import capture_dirs
 from virtus.checks import positive
@@ -427,8 +430,7 @@ def validate_twin(
     light = load_photometry(twin) if isinstance(twin, str | Path) else twin
 
     rig, poses, the_board, items = _validation_inputs(calibration, captures, board, units)
-    blur = CHECKER_BLUR_M if the_board.TYPE == "checkerboard" else BOARD_BLUR_M
-    texture = the_board.texture(pixel_size_m=BOARD_TEXEL_M, blur_m=blur)
+    texture = board_texture(the_board)
     per_pose: list[dict[str, Any]] = []
     dropped: dict[str, str] = {}
     for index, item in enumerate(items):
