@@ -57,3 +57,15 @@ def test_a_bad_pixel_size_is_one_line_and_writes_nothing(folder, tmp_path, capsy
     code, err = _twin(argv, capsys)
     assert code == 2 and err.count("\n") == 1 and "--pixel-size-um" in err, err
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("option", "value"),
+    [("--camera-size", "0,960"), ("--camera-size", "960"), ("--projector-size", "abc,1140")],
+)
+def test_a_bad_size_is_one_line_and_writes_nothing(folder, tmp_path, capsys, option, value):
+    out = tmp_path / "twin"
+    argv = ["twin", folder, "--out", out, *SIZES, option, value]
+    code, err = _twin(argv, capsys)
+    assert code == 2 and err.count("\n") == 1 and option in err, err
+    assert not out.exists()

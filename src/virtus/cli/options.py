@@ -242,8 +242,7 @@ def load_sequence_option(path: Path | None, width: int, height: int):  # noqa: A
 
 
 def parse_size(text: str | None, option: str = "--camera-size") -> tuple[int, int] | None:
-    """``(width, height)`` from ``'W,H'`` (or ``'WxH'``), or None; the library checks that
-    both are positive."""
+    """``(width, height)`` from ``'W,H'`` (or ``'WxH'``), both at least 1 px, or None."""
     from virtus.errors import InputError
 
     if text is None:
@@ -253,6 +252,8 @@ def parse_size(text: str | None, option: str = "--camera-size") -> tuple[int, in
         width, height = (int(part.strip()) for part in parts)
     except ValueError:
         raise InputError(option, "'W,H' (two whole numbers of pixels)", text) from None
+    if width < 1 or height < 1:
+        raise InputError(option, "'W,H' of at least 1 px each", text)
     return width, height
 
 
