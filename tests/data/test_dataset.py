@@ -595,3 +595,12 @@ def test_a_record_of_another_dataset_does_not_count_as_complete(mixed, tmp_path)
         assert 1 in missing
         start, stop = store.shard_bounds(1, 12)
         assert not set(range(start, stop)) & set(store.samples())
+
+
+@pytest.mark.parametrize("spec", ["4x7", "checker:6x9,square_mm=30"])
+def test_calibration_mode_boards_are_textured_as_the_calibration_job_textures_them(spec) -> None:
+    from virtus.calib.board import board_from_spec
+    from virtus.calib.scene import board_texture
+    from virtus.data.sampling import _board_texture
+
+    np.testing.assert_array_equal(_board_texture(spec), board_texture(board_from_spec(spec)))

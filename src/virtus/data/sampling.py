@@ -540,11 +540,12 @@ class Randomiser:
 
 @functools.lru_cache(maxsize=4)
 def _board_texture(spec: str) -> np.ndarray:
-    """The board's albedo texture (as the calibration job renders it)."""
+    """The board's albedo texture, as the calibration job renders it (a checkerboard's edges
+    softened as a checkerboard's, not a circle board's)."""
     from virtus.calib.board import board_from_spec
-    from virtus.calib.scene import BOARD_BLUR_M, BOARD_TEXEL_M
+    from virtus.calib.scene import board_texture
 
-    return board_from_spec(spec).texture(pixel_size_m=BOARD_TEXEL_M, blur_m=BOARD_BLUR_M)
+    return board_texture(board_from_spec(spec))
 
 
 @functools.lru_cache(maxsize=256)
