@@ -37,6 +37,9 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("render",),
     ("scanner",),
     ("pipeline", "data"),
+    # Job-level packages built on the jobs and the datasets: the acceptance test and design
+    # sweeps, robots, learning, and the report that shows any run.
+    ("design", "robot", "learn", "report"),
     ("cli", "__main__"),
 )
 #: Floor packages that may not import each other although they share a floor.
