@@ -20,10 +20,20 @@ before a plane) with :func:`virtus.data.generate`, once per ``--workers`` value 
 * for context, the renderer alone on the same scenes (``Scanner.capture``, frames/s): the
   ceiling a dataset run can reach on this machine;
 * with ``--codecs``, every codec and level on one stored sample: compression seconds on one
-  thread and compressed bytes (speed against size).
+  thread and compressed bytes (speed against size);
+* with ``--gpus 1,2,4``: the same store made on 1, 2, 4 GPUs (``--workers-per-gpu`` pinned
+  workers each, default 3/4 of the cores shared out over the most GPUs asked for), side by
+  side: images/s over the whole run and in its steady state (between 10 % and 90 % of the
+  samples: worker start-up and the last stragglers left out), CPU seconds a sample, the
+  scaling against linear (steady images/s per GPU over the first count's), and whether the
+  store is byte for byte the first count's. Without GPUs, ``--fake-gpus N`` makes ``N``
+  fake ones visible (``VIRTUS_FAKE_GPUS``: the workers render on the CPU) -- a smoke check
+  of the code path, not a measurement; ``--tiny`` uses a 64 x 48 camera and 22 frames.
 
     PYTHONPATH=src python benchmarks/bench_dataset.py [--samples 8] [--workers 1 2] [--codecs]
         [--json out.json]
+    PYTHONPATH=src python benchmarks/bench_dataset.py --gpus 1,2,4 --samples 480
+    PYTHONPATH=src python benchmarks/bench_dataset.py --gpus 1,2 --fake-gpus 2 --tiny --samples 16
 
 Not a test: numbers depend on the machine and its load (quote them with the load average;
 on a shared machine compare old and new code back to back).
@@ -50,7 +60,9 @@ from virtus.data.shards import ShardEncoder
 from virtus.data.store import zarr_compressor
 
 
-def config_file(folder: Path, samples: int, shard: int, codec: str, level: int, dtype: str) -> Path:
+def config_file(
+    folder: Path, samples: int, shard: int, codec: str, level: int, dtype: str, tiny: bool = False
+) -> Path:
     data = {
         "mode": "training",
         "seed": 0,
@@ -70,6 +82,16 @@ def config_file(folder: Path, samples: int, shard: int, codec: str, level: int, 
             "label_dtype": dtype,
         },
     }
+    if tiny:  # a 64 x 48 camera, the projector at a quarter of its size, 22 frames
+        from virtus.geometry.devices import Camera, Projector, Rig, default_rig
+        from virtus.geometry.optics import Intrinsics
+
+        rig = default_rig()
+        camera = Intrinsics(152.4, 152.4, 31.5, 23.5, 64, 48)
+        small = Rig(Camera(camera), Projector(rig.projector.intrinsics.scaled(0.25)), rig.proj2cam)
+        small.save_json(folder / "rig.json")
+        data["rig"] = {"file": "rig.json"}
+        data["fringes"] = {"codings": ["gray"], "steps": [4], "periods": [16]}
     path = folder / "bench.yaml"
     path.write_text(yaml.safe_dump(data))
     return path
@@ -168,6 +190,105 @@ def run(config, folder: Path, samples: int, workers: int, frames_per_sample: int
     }
 
 
+def store_digests(path: Path) -> dict[str, str]:
+    """Relative path -> SHA-256 of every file of a store (the lock file aside), hashed on a
+    few threads (hashlib releases the GIL)."""
+    import hashlib
+    from concurrent.futures import ThreadPoolExecutor
+
+    files = [p for p in sorted(path.rglob("*")) if p.is_file() and p.name != ".virtus.lock"]
+
+    def digest(file: Path) -> str:
+        with file.open("rb") as handle:
+            return hashlib.file_digest(handle, "sha256").hexdigest()
+
+    with ThreadPoolExecutor(8) as pool:
+        names = [p.relative_to(path).as_posix() for p in files]
+        return dict(zip(names, pool.map(digest, files), strict=True))
+
+
+def steady_rate(ticks: list[tuple[float, int]], samples: int) -> float | None:
+    """Samples/s between the progress ticks at 10 % and 90 % of ``samples`` (None when the
+    run had too few ticks between them)."""
+    low = next((t for t in ticks if t[1] >= 0.1 * samples), None)
+    high = next((t for t in ticks if t[1] >= 0.9 * samples), None)
+    if low is None or high is None or high[0] <= low[0] or high[1] <= low[1]:
+        return None
+    return (high[1] - low[1]) / (high[0] - low[0])
+
+
+def gpu_run(config, folder: Path, samples: int, gpus: int, per_gpu: int, frames: int) -> dict:
+    """One generation of the store on ``gpus`` GPUs, ``per_gpu`` pinned workers each."""
+    store_path = folder / f"store_g{gpus}"
+    ticks: list[tuple[float, int]] = []
+
+    def progress(done: int, total: int, rendered: int) -> None:
+        ticks.append((time.perf_counter(), rendered))
+
+    load_before, cpu_before = load(), cpu_seconds()
+    report = generate(config, store_path, gpus=gpus, workers_per_gpu=per_gpu, progress=progress)
+    cpu = cpu_seconds() - cpu_before
+    steady = steady_rate(ticks, samples)
+    per_device: dict[str, int] = {}
+    for device in report.shard_devices.values():
+        per_device[str(device)] = per_device.get(str(device), 0) + 1
+    return {
+        "gpus": gpus,
+        "workers": gpus * per_gpu,
+        "load_average_before": load_before,
+        "load_average_after": load(),
+        "seconds": round(report.seconds, 3),
+        "images_per_s": round(samples * frames / report.seconds, 2),
+        "steady_images_per_s": None if steady is None else round(steady * frames, 2),
+        "cpu_s_per_sample": round(cpu / samples, 3),
+        "shards_per_device": per_device,
+        "bytes_on_disk": sum(p.stat().st_size for p in store_path.rglob("*") if p.is_file()),
+    }
+
+
+def gpu_scaling(config, folder: Path, samples: int, counts: list[int], per_gpu: int,
+                frames: int, keep_first: bool) -> list[dict]:  # fmt: skip
+    """:func:`gpu_run` per GPU count, after a one-shard warm-up (kernel caches); each store
+    is compared with the first count's (SHA-256 of every file), then deleted (at 960 x 960 a
+    sample takes ~35 MB on disk): only the first is kept, with ``keep_first``."""
+    import shutil
+
+    warm = config.with_num_samples(config.shard_samples)
+    generate(warm, folder / "warm-up", gpus=1, workers_per_gpu=1)
+    shutil.rmtree(folder / "warm-up")
+    runs, first = [], None
+    for count in counts:
+        entry = gpu_run(config, folder, samples, count, per_gpu, frames)
+        digests = store_digests(folder / f"store_g{count}")
+        if first is None:
+            first = digests
+        if not (keep_first and len(runs) == 0):
+            shutil.rmtree(folder / f"store_g{count}")
+        entry["store_identical_to_first"] = digests == first
+        rate, base = entry["steady_images_per_s"], runs[0] if runs else entry
+        if rate is not None and base["steady_images_per_s"]:
+            linear = base["steady_images_per_s"] * count / base["gpus"]
+            entry["scaling_vs_linear"] = round(rate / linear, 3)
+        else:
+            entry["scaling_vs_linear"] = None
+        runs.append(entry)
+        print(gpu_line(entry), file=sys.stderr, flush=True)
+    return runs
+
+
+def gpu_line(entry: dict) -> str:
+    steady = entry["steady_images_per_s"]
+    return (
+        f"gpus {entry['gpus']} ({entry['workers']} workers): {entry['images_per_s']:.1f} "
+        f"images/s, steady {steady if steady is not None else '-'}; "
+        f"{entry['cpu_s_per_sample']:.2f} CPU-s a sample; scaling "
+        f"{entry['scaling_vs_linear'] if entry['scaling_vs_linear'] is not None else '-'} x "
+        f"linear; store identical: {entry['store_identical_to_first']}; "
+        f"{entry['seconds']:.1f} s, load {entry['load_average_before']} -> "
+        f"{entry['load_average_after']}; shards per device {entry['shards_per_device']}"
+    )
+
+
 def summary(result: dict) -> str:
     lines = [
         f"{result['machine']}; {result['image_px']} px, {result['frames_per_sample']} frames a "
@@ -178,6 +299,8 @@ def summary(result: dict) -> str:
             f"renderer alone: {result['renderer_only_images_per_s']:.1f} images/s "
             f"(load {result['renderer_load_average']})"
         )
+    for entry in result.get("gpu_runs", []):
+        lines.append(gpu_line(entry))
     for entry in result["runs"]:
         stages = entry["stage_s"]
         split = ", ".join(f"{k} {stages[k]:.2f}" for k in TIMING_KEYS if k != "write")
@@ -196,6 +319,34 @@ def summary(result: dict) -> str:
     return "\n".join(lines)
 
 
+def gpu_counts(text: str) -> list[int]:
+    """``--gpus``: a comma-separated list of positive GPU counts, e.g. ``1,2,4``."""
+    try:
+        counts = [int(part) for part in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected GPU counts such as 1,2,4, got {text!r}"
+        ) from None
+    if not counts or min(counts) < 1 or len(counts) > 16:
+        raise argparse.ArgumentTypeError(f"expected 1 to 16 positive GPU counts, got {text!r}")
+    return counts
+
+
+def gpu_setup(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+    """Check ``--gpus`` against the visible GPUs (after ``--fake-gpus``); the workers a GPU."""
+    from virtus.data.devices import FAKE_GPUS_ENV, cpu_cores, visible_gpus
+
+    if args.fake_gpus is not None:
+        os.environ[FAKE_GPUS_ENV] = str(args.fake_gpus)
+    visible = visible_gpus()
+    if max(args.gpus) > len(visible):
+        parser.error(
+            f"--gpus {max(args.gpus)}: only {len(visible)} GPUs are visible here "
+            "(--fake-gpus N for a CPU smoke check)"
+        )
+    return args.workers_per_gpu or max(1, cpu_cores() * 3 // 4 // max(args.gpus))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=8)
@@ -204,26 +355,48 @@ def main() -> None:
     parser.add_argument("--level", type=int, default=1)
     parser.add_argument("--label-dtype", default="float32", choices=["float32", "float64"])
     parser.add_argument("--workers", type=int, nargs="+", default=[1])
+    parser.add_argument(
+        "--gpus", type=gpu_counts, help="GPU counts to compare, e.g. 1,2,4 (replaces --workers)"
+    )
+    parser.add_argument(
+        "--workers-per-gpu", type=int, help="pinned workers a GPU (default: 3/4 of the cores "
+        "shared out over the largest GPU count)",
+    )  # fmt: skip
+    parser.add_argument("--fake-gpus", type=int, help="make N fake GPUs visible (CPU smoke)")
+    parser.add_argument("--tiny", action="store_true", help="64 x 48 camera, 22 frames")
     parser.add_argument("--codecs", action="store_true", help="also compare codecs and levels")
     parser.add_argument("--no-renderer", action="store_true", help="skip the renderer alone")
     parser.add_argument("--json", type=Path, help="also write the numbers here")
     args = parser.parse_args()
+    per_gpu = gpu_setup(parser, args) if args.gpus else None
 
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         config = load_config(
-            config_file(folder, args.samples, args.shard, args.codec, args.level, args.label_dtype)
-        )
-        frames_per_sample = len(Randomiser(config, folder / "assets").sample(0).scanner.sequence)
+            config_file(
+                folder, args.samples, args.shard, args.codec, args.level, args.label_dtype,
+                args.tiny,
+            )
+        )  # fmt: skip
+        sample = Randomiser(config, folder / "assets").sample(0)
+        frames_per_sample = len(sample.scanner.sequence)
+        cam = sample.scanner.rig.camera.intrinsics
         renderer_load = load()
-        renderer = None if args.no_renderer else renderer_only(config, folder, args.samples)
-        runs = [run(config, folder, args.samples, w, frames_per_sample) for w in args.workers]
-        store = DatasetStore.open(folder / f"store_w{args.workers[0]}")
-        codecs = codec_table(store) if args.codecs else []
+        renderer, runs, gpu_runs = None, [], []
+        if args.gpus:  # the renderer alone would hold a CUDA context in this process
+            gpu_runs = gpu_scaling(
+                config, folder, args.samples, args.gpus, per_gpu, frames_per_sample, args.codecs
+            )
+            first = folder / f"store_g{args.gpus[0]}"
+        else:
+            renderer = None if args.no_renderer else renderer_only(config, folder, args.samples)
+            runs = [run(config, folder, args.samples, w, frames_per_sample) for w in args.workers]
+            first = folder / f"store_w{args.workers[0]}"
+        codecs = codec_table(DatasetStore.open(first)) if args.codecs else []
     result = {
         "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
         f"{platform.system()}",
-        "image_px": "960x960",
+        "image_px": f"{cam.width}x{cam.height}",
         "frames_per_sample": frames_per_sample,
         "samples": args.samples,
         "shard_samples": args.shard,
@@ -233,6 +406,9 @@ def main() -> None:
         "renderer_only_images_per_s": renderer and round(renderer, 1),
         "renderer_load_average": renderer_load,
         "runs": runs,
+        "workers_per_gpu": per_gpu,
+        "fake_gpus": args.fake_gpus,
+        "gpu_runs": gpu_runs,
         "codecs": codecs,
         "paper_images_per_s": 3.1,
         "target_images_per_s": 150.0,

@@ -23,7 +23,9 @@
    same bytes. Tasks run in this process (``workers=1``: rendering, labelling and writing
    run side by side on three threads,
    :func:`_run_pipelined`), in ``workers`` spawned processes (each owns the shards it is
-   given), or as Ray tasks.
+   given; on a host with GPUs each is pinned to one, :mod:`virtus.data.devices`, and uses
+   its share of the cores), or on Ray (:mod:`virtus.data.raycluster`: CPU tasks, or one
+   actor per GPU share).
 
 Rerunning the same command after an interruption (even ``kill -9``) renders only the
 shards without a record; the store ends byte for byte as an uninterrupted run leaves it.
@@ -32,12 +34,9 @@ shards without a record; the store ends byte for byte as an uninterrupted run le
 from __future__ import annotations
 
 import functools
-import logging
 import os
-import socket
-import threading
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -45,8 +44,19 @@ from typing import Any
 import numpy as np
 
 from virtus import __version__
+from virtus.data import devices as _devices
+from virtus.data import store as _store_module
 from virtus.data.config import MAX_SHARD_BYTES, MAX_WORKERS, DatasetConfig
+from virtus.data.devices import Placement
 from virtus.data.labels import array_layout, sample_arrays
+from virtus.data.raycluster import (
+    MAX_RAY_TIMEOUT_S,
+    RAY_TIMEOUT_S,
+    connect_ray,
+    gpu_slots,
+    run_actors,
+    run_tasks,
+)
 from virtus.data.sampling import Randomiser, SampleSpec
 from virtus.data.store import ASSETS_DIR, DatasetStore, EncodedSample
 from virtus.errors import InputError
@@ -87,11 +97,9 @@ _IN_WORKER = False
 #: suite checks the device path on the CPU's LLVM variant).
 LABELS_ON_DEVICE: bool | None = None
 _WORKER_BUFFER: tuple[tuple[str, str], dict[str, np.ndarray]] | None = None
-#: Seconds a Ray cluster address has to answer (``--ray-timeout``): Ray itself retries an
-#: unreachable address for minutes (20 attempts of ~40 s in Ray 2.x).
-RAY_TIMEOUT_S = 15.0
-#: Longest ``ray_timeout`` accepted, seconds.
-MAX_RAY_TIMEOUT_S = 3600.0
+#: In a worker process: the CPU threads it may use to synthesise, checksum and compress
+#: (its share of the host's cores, :attr:`virtus.data.devices.Placement.threads`).
+_WORKER_THREADS: int | None = None
 
 
 @dataclass
@@ -108,6 +116,8 @@ class GenerateReport:
     timing_s : seconds per stage (:data:`TIMING_KEYS`) summed over the shards rendered
         here, across all workers and threads; stages that run side by side (samples are
         labelled and written while later ones render) sum to more than ``seconds``.
+    shard_devices : shard -> the GPU (``CUDA_VISIBLE_DEVICES`` entry) that rendered it in
+        this call; None on CPU (not recorded in the store: it does not change a byte).
     """
 
     path: Path
@@ -116,6 +126,7 @@ class GenerateReport:
     rendered: int
     seconds: float
     timing_s: dict[str, float] = field(default_factory=dict)
+    shard_devices: dict[int, str | None] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -126,6 +137,7 @@ class GenerateReport:
             "seconds": self.seconds,
             "samples_per_s": self.rendered / self.seconds if self.seconds > 0 else None,
             "timing_s": self.timing_s,
+            "shard_devices": {str(k): v for k, v in self.shard_devices.items()},
         }
 
 
@@ -265,8 +277,10 @@ def _render_and_label(
 
 
 def _synthesis_threads(randomiser: Randomiser) -> int | None:
+    """Host synthesis threads: 1 for small images, else the worker's share of the cores
+    (:data:`_WORKER_THREADS`; None, all cores, outside a worker)."""
     cam = randomiser.rig.camera.intrinsics
-    return 1 if cam.width * cam.height <= _SMALL_IMAGE_PIXELS else None
+    return 1 if cam.width * cam.height <= _SMALL_IMAGE_PIXELS else _WORKER_THREADS
 
 
 def _fill_shard(
@@ -337,13 +351,17 @@ def render_shard(
 
     Returns
     -------
-    ``{"shard", "samples", "timing_s"}``, ``timing_s`` with the keys of
-    :data:`TIMING_KEYS`.
+    ``{"shard", "samples", "timing_s", "device"}``, ``timing_s`` with the keys of
+    :data:`TIMING_KEYS`, ``device`` the GPU a worker process was pinned to (its
+    ``CUDA_VISIBLE_DEVICES``; None in the calling process and on CPU).
     """
     store, randomiser = _open(path, digest)
     buffer = _shard_buffer(store)
     metas, timing = _fill_shard(store, randomiser, shard, num_samples, buffer, on_sample)
-    return _result(shard, metas, timing, store.write_shard(shard, buffer, metas), 0.0)
+    result = _result(shard, metas, timing, store.write_shard(shard, buffer, metas), 0.0)
+    if _IN_WORKER:
+        result["device"] = os.environ.get(_devices.CUDA_ENV) or None
+    return result
 
 
 def _result(
@@ -362,7 +380,7 @@ def _result(
         "write": write["wall"],
         "write_wait": wait,
     }
-    return {"shard": shard, "samples": len(metas), "timing_s": stages}
+    return {"shard": shard, "samples": len(metas), "timing_s": stages, "device": None}
 
 
 def _write_labelled(
@@ -455,11 +473,19 @@ def _run_pipelined(
             yield finish()
 
 
-def _worker_init() -> None:
-    """In a spawned worker: die with the parent (Linux), so a killed ``generate`` leaves no
-    orphan writing into the store; keep one shard buffer from task to task."""
-    global _IN_WORKER
+def _worker_init(threads: int, die_with_parent: bool = True) -> None:
+    """In a worker process (after :func:`virtus.data.devices.pinned_pool` pinned it to its
+    GPU, or in a Ray actor): use ``threads`` CPU threads to synthesise, checksum and
+    compress; keep one shard buffer from task to task; with ``die_with_parent`` die with
+    the parent (Linux), so a killed ``generate`` leaves no orphan writing into the store."""
+    global _IN_WORKER, _WORKER_THREADS
     _IN_WORKER = True
+    _WORKER_THREADS = threads
+    # The store's own checksum/compression threads, at most its default: more threads than
+    # the worker's share of the cores only add memory in flight.
+    _store_module._WRITE_THREADS = max(1, min(_store_module._WRITE_THREADS, threads))
+    if not die_with_parent:
+        return
     try:
         import ctypes
         import signal
@@ -470,9 +496,13 @@ def _worker_init() -> None:
 
 
 def _run_local(
-    path: Path, shards: list[int], num: int, digest: str, workers: int, tick: Callable,
-    pipelined: bool,
+    path: Path, shards: list[int], num: int, digest: str, placement: Placement,
+    tick: Callable, pipelined: bool,
 ) -> Iterator[dict[str, Any]]:  # fmt: skip
+    """The shards in this process (one worker) or in ``placement.workers`` spawned
+    processes, each pinned to its GPU (:func:`virtus.data.devices.pinned_pool`); at most two
+    shards a worker are queued."""
+    workers = placement.workers
     if workers == 1 and pipelined:
         yield from _run_pipelined(path, shards, num, digest, tick)
         return
@@ -480,11 +510,10 @@ def _run_local(
         for shard in shards:
             yield render_shard(path, shard, num, digest, on_sample=lambda: tick(1))
         return
-    import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures import FIRST_COMPLETED, wait
 
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(workers, mp_context=context, initializer=_worker_init) as pool:
+    pool = _devices.pinned_pool(workers, placement.devices, _worker_init, (placement.threads,))
+    with pool:
         pending = set()
         queue = iter(shards)
         for shard in queue:
@@ -502,127 +531,28 @@ def _run_local(
                     pending.add(pool.submit(render_shard, str(path), nxt, num, digest))
 
 
-def _ray_endpoint(address: str) -> tuple[str, int] | None:
-    """``(host, port)`` of a Ray cluster address (``host:port``, ``ray://host:port``);
-    None for ``"auto"`` and ``"local"``."""
-    if address in ("auto", "local"):
-        return None
-    host, colon, port = address.removeprefix("ray://").rpartition(":")
-    host = host.removeprefix("[").removesuffix("]")  # [IPv6]:port
-    if not colon or not host or not port.isdigit() or not 0 < int(port) < 65536:
-        raise InputError("--ray", "'auto', 'local' or a cluster address host:port", address)
-    return host, int(port)
-
-
-def _within(seconds: float, name: str, work: Callable[[], Any]) -> Any:
-    """``work()`` on a daemon thread: its value or its exception, or :class:`TimeoutError`
-    when it has not returned after ``seconds`` (it is then left to finish on its own: a
-    connection attempt that Ray or the resolver cannot be told to abandon)."""
-    box: dict[str, Any] = {}
-
-    def run() -> None:
-        try:
-            box["value"] = work()
-        except BaseException as error:  # handed to the caller
-            box["error"] = error
-
-    thread = threading.Thread(target=run, name=name, daemon=True)
-    thread.start()
-    thread.join(seconds)
-    if thread.is_alive():
-        raise TimeoutError(f"no answer within {seconds:g} s")
-    if "error" in box:
-        raise box["error"]
-    return box.get("value")
-
-
-class _NotMainThread(logging.Filter):
-    """Drops Ray's warning that ``ray.init`` runs off the main thread (on purpose here)."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        return "not the main thread" not in record.getMessage()
-
-
-def connect_ray(address: str, timeout: float = RAY_TIMEOUT_S) -> Any:
-    """Connect this process to a Ray cluster, or give up after ``timeout`` seconds.
-
-    Parameters
-    ----------
-    address : ``"auto"`` (the running cluster), ``"local"`` (start one here) or a cluster
-        address ``host:port``; a Ray session already initialised in this process is used
-        as it is.
-    timeout : seconds the address has to accept a connection and Ray to connect to it.
-
-    Returns
-    -------
-    The ``ray`` module, initialised.
-
-    Raises
-    ------
-    InputError : Ray is not installed, the address is malformed, or no cluster answered
-        there in time (the address named, with the reason: refused, unknown host, no
-        answer).
-    """
-    try:
-        import ray
-    except ImportError:
-        raise InputError(
-            "--ray", "Ray installed (pip install 'virtus-fpp[data]' or ray)", "no ray module"
-        ) from None
-    if ray.is_initialized():
-        return ray
-    endpoint = _ray_endpoint(address)
-    if address == "local":  # a cluster started here: nothing to wait for
-        ray.init(log_to_driver=False)
-        return ray
-    expected = f"the address of a running Ray cluster that answers within {timeout:g} s"
-    deadline = time.monotonic() + timeout
-    if endpoint is not None:  # refused, unknown or unreachable: known before Ray is asked
-
-        def probe() -> None:
-            socket.create_connection(endpoint, timeout=timeout).close()
-
-        try:
-            _within(timeout, "virtus-ray-probe", probe)
-        except OSError as error:  # TimeoutError included
-            reason = error.strerror or str(error) or type(error).__name__
-            raise InputError("--ray", expected, f"{address} ({reason})") from None
-    log = logging.getLogger("ray._private.worker")
-    quiet = _NotMainThread()
-    log.addFilter(quiet)
-    try:
-        _within(
-            max(deadline - time.monotonic(), 1.0), "virtus-ray-init",
-            functools.partial(ray.init, address=address, log_to_driver=False),
-        )  # fmt: skip
-    except TimeoutError:
-        raise InputError("--ray", expected, f"{address} (Ray did not connect in time)") from None
-    except Exception as error:  # Ray raises many types for a failed connection
-        reason = " ".join(str(error).split())[:160]
-        raise InputError("--ray", expected, f"{address} ({reason})") from None
-    finally:
-        log.removeFilter(quiet)
-    return ray
-
-
 def _run_ray(
-    path: Path, shards: list[int], num: int, digest: str, address: str, workers: int,
-    tick: Callable, timeout: float = RAY_TIMEOUT_S,
+    path: Path, shards: list[int], num: int, digest: str, ray: Any, workers: int,
+    slots: tuple[int, float], tick: Callable,
 ) -> Iterator[dict[str, Any]]:  # fmt: skip
-    ray = connect_ray(address, timeout)
-    task = ray.remote(num_cpus=1, max_retries=3)(render_shard)
-    in_flight = max(2 * workers, 2 * int(ray.cluster_resources().get("CPU", 1)))
-    queue: Iterable[int] = iter(shards)
-    first = [s for _, s in zip(range(in_flight), queue, strict=False)]
-    pending = [task.remote(str(path), s, num, digest) for s in first]
-    while pending:
-        done, pending = ray.wait(pending, num_returns=1)
-        result = ray.get(done[0])
+    """The shards on a connected Ray cluster: as CPU tasks (``2 * max(workers, CPUs)`` in
+    flight), or on ``slots = (actors, GPU share)`` GPU actors (:func:`gpu_slots`)."""
+    resources = ray.cluster_resources()
+
+    def args(shard: int) -> tuple:
+        return (str(path), shard, num, digest)
+
+    if slots[0]:
+        threads = max(1, int(resources.get("CPU", 1)) // slots[0])
+        results = run_actors(
+            ray, render_shard, args, shards, slots[0], slots[1], _worker_init, (threads, False)
+        )
+    else:
+        in_flight = max(2 * workers, 2 * int(resources.get("CPU", 1)))
+        results = run_tasks(ray, render_shard, args, shards, in_flight)
+    for result in results:
         tick(result["samples"])
         yield result
-        nxt = next(queue, None)  # type: ignore[call-overload]
-        if nxt is not None:
-            pending.append(task.remote(str(path), nxt, num, digest))
 
 
 def _check_mesh_files(config: DatasetConfig) -> None:
@@ -636,12 +566,50 @@ def _check_mesh_files(config: DatasetConfig) -> None:
                 check_mesh_file(source.path / name)  # type: ignore[operator]
 
 
+def _layout(config: DatasetConfig, out: Path) -> tuple[Any, int]:
+    """The store's array layout and the bytes of one shard in memory (bounded)."""
+    randomiser = Randomiser(config, out / ASSETS_DIR)
+    cam = randomiser.rig.camera.intrinsics
+    layout = array_layout(
+        randomiser.max_frames, cam.height, cam.width, randomiser.bit_depth, config.label_dtype
+    )
+    shard_bytes = config.shard_samples * sum(a.nbytes for a in layout)
+    if shard_bytes > MAX_SHARD_BYTES:
+        raise InputError(
+            "storage.shard_samples",
+            f"shards of at most {MAX_SHARD_BYTES >> 20} MiB in memory",
+            f"{config.shard_samples} samples x {sum(a.nbytes for a in layout) >> 20} MiB",
+        )
+    return layout, shard_bytes
+
+
+def _connect(
+    ray: str, timeout: float, workers: int | None, gpus: int | str | None,
+    workers_per_gpu: int | None,
+) -> tuple[Any, tuple[int, float]]:  # fmt: skip
+    """The connected ``ray`` module and the GPU actors to start (:func:`gpu_slots`)."""
+    if (
+        isinstance(timeout, bool)
+        or not isinstance(timeout, int | float)
+        or not (0 < timeout <= MAX_RAY_TIMEOUT_S)
+    ):
+        raise InputError("ray_timeout", f"seconds in (0, {MAX_RAY_TIMEOUT_S:g}]", timeout)
+    if workers is not None and (
+        isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= MAX_WORKERS
+    ):
+        raise InputError("workers", f"an integer in 1..{MAX_WORKERS}", workers)
+    module = connect_ray(ray, float(timeout))
+    return module, gpu_slots(module, gpus, workers_per_gpu)
+
+
 def generate(
     config: DatasetConfig,
     out: str | Path,
     *,
     num: int | None = None,
-    workers: int = 1,
+    workers: int | None = None,
+    gpus: int | str | None = None,
+    workers_per_gpu: int | None = None,
     ray: str | None = None,
     storage: str = "zarr",
     progress: Progress | None = None,
@@ -656,8 +624,14 @@ def generate(
         which is completed or extended to ``num`` samples).
     num : samples (default ``config.num_samples``), at most
         :data:`~virtus.data.config.MAX_SAMPLES`.
-    workers : local worker processes (1: this process), at most
-        :data:`~virtus.data.config.MAX_WORKERS`; with Ray, the tasks kept in flight per CPU.
+    workers : local worker processes in all (1: this process), at most
+        :data:`~virtus.data.config.MAX_WORKERS`; default one per GPU used times
+        ``workers_per_gpu``, or 1 without GPUs. With Ray, the CPU tasks kept in flight per
+        CPU.
+    gpus : GPUs to render on, an integer or ``"all"`` (default: every visible GPU,
+        :func:`virtus.data.devices.visible_gpus`, or with Ray the cluster's); worker ``k``
+        is pinned to GPU ``k mod G`` (:func:`virtus.data.devices.plan`).
+    workers_per_gpu : worker processes (Ray: actors of ``1 / workers_per_gpu`` GPU) per GPU.
     ray : None (local), ``"auto"`` (the running Ray cluster), ``"local"`` (start one here)
         or a cluster address; a Ray session already initialised in this process is used.
     storage : ``"zarr"`` (sharded Zarr v3) or ``"png"`` (per-sample folders).
@@ -665,41 +639,28 @@ def generate(
     ray_timeout : seconds a Ray cluster address has to answer (:func:`connect_ray`),
         at most :data:`MAX_RAY_TIMEOUT_S`.
 
+    The store does not depend on the workers, GPUs or Ray: its bytes are those of a
+    one-process run of the same configuration (which GPU rendered which shard is in the
+    report, :attr:`GenerateReport.shard_devices`, not in the store).
+
     Raises
     ------
     InputError, VirtusError, OSError : bad configuration or sizes, an output folder that
         is not writable, not empty or a store of another configuration (or with records of
         another dataset, or an edited ``dataset.json``), a truncated mesh file, a Ray
-        address where no cluster answers in time -- all before any sample is rendered and
-        before the store is written to (its lock file aside).
+        address where no cluster answers in time, more GPUs than visible (or than the
+        cluster has) -- all before any sample is rendered and before the store is written
+        to (its lock file aside).
     """
     config = config.with_num_samples(num)
-    if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= MAX_WORKERS:
-        raise InputError("workers", f"an integer in 1..{MAX_WORKERS}", workers)
+    placement = None if ray is not None else _devices.plan(workers, gpus, workers_per_gpu)
     out = Path(out)
-    randomiser = Randomiser(config, out / ASSETS_DIR)
-    cam = randomiser.rig.camera.intrinsics
-    layout = array_layout(
-        randomiser.max_frames, cam.height, cam.width, randomiser.bit_depth, config.label_dtype
-    )
-    shard_bytes = config.shard_samples * sum(a.nbytes for a in layout)
-    if shard_bytes > MAX_SHARD_BYTES:
-        raise InputError(
-            "storage.shard_samples",
-            f"shards of at most {MAX_SHARD_BYTES >> 20} MiB in memory",
-            f"{config.shard_samples} samples x {sum(a.nbytes for a in layout) >> 20} MiB",
-        )
+    layout, shard_bytes = _layout(config, out)
     if out.exists() and not out.is_dir():
         raise InputError("--out", "a folder (new, empty, or a dataset store)", f"a file {out}")
     _check_mesh_files(config)
-    if ray is not None:
-        if (
-            isinstance(ray_timeout, bool)
-            or not isinstance(ray_timeout, int | float)
-            or not 0 < ray_timeout <= MAX_RAY_TIMEOUT_S
-        ):
-            raise InputError("ray_timeout", f"seconds in (0, {MAX_RAY_TIMEOUT_S:g}]", ray_timeout)
-        connect_ray(ray, float(ray_timeout))  # before the store is touched
+    if ray is not None:  # before the store is touched
+        cluster, slots = _connect(ray, ray_timeout, workers, gpus, workers_per_gpu)
     with directory_lock(out):
         store = DatasetStore.prepare(
             out,
@@ -724,18 +685,27 @@ def generate(
         if progress is not None:
             progress(complete, target, 0)
         timing = dict.fromkeys(TIMING_KEYS, 0.0)
+        shard_devices: dict[int, str | None] = {}
         start = time.perf_counter()
-        if ray is None:
+        if placement is not None:
             # two shards in memory when one is written while the next is rendered
             pipelined = 2 * shard_bytes <= MAX_SHARD_BYTES
-            results = _run_local(out, todo, target, store.digest, workers, tick, pipelined)
+            results = _run_local(out, todo, target, store.digest, placement, tick, pipelined)
         else:
-            results = _run_ray(
-                out, todo, target, store.digest, ray, workers, tick, float(ray_timeout)
-            )
+            results = _run_ray(out, todo, target, store.digest, cluster, workers or 1, slots, tick)
+        here = placement.devices[0] if placement is not None and placement.devices else None
         for result in results:
             for stage, seconds in result["timing_s"].items():
                 timing[stage] += seconds
+            shard_devices[result["shard"]] = result["device"] or here
         seconds = time.perf_counter() - start
         complete = sum(1 for i in store.samples() if i < target)
-    return GenerateReport(out, target, complete, counter["rendered"], seconds, timing)
+    return GenerateReport(
+        out,
+        target,
+        complete,
+        counter["rendered"],
+        seconds,
+        timing,
+        dict(sorted(shard_devices.items())),
+    )
