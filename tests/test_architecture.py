@@ -33,7 +33,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("io",),
     ("geometry",),
     ("patterns", "sensor", "scene"),
-    ("capture", "reconstruct", "metrology", "calib", "twin"),
+    ("capture", "reconstruct", "metrology", "calib", "twin", "uncertainty"),
     ("render",),
     ("scanner",),
     ("pipeline", "data"),
@@ -54,7 +54,7 @@ COMPOSES: dict[str, tuple[str, ...]] = {
 #: Modules of ``pipeline`` that are not jobs (shared by the jobs).
 PIPELINE_SHARED = ("pipeline", "pipeline.inputs")
 #: Packages that must never reach the renderer, not even inside a function.
-RENDER_FREE = ("capture", "patterns", "reconstruct", "calib")
+RENDER_FREE = ("capture", "patterns", "reconstruct", "calib", "uncertainty")
 #: Third-party packages only the renderer may import.
 RENDERER_ONLY = ("mitsuba", "drjit")
 MAX_MODULE_LINES, MAX_FUNCTION_LINES, MAX_CLASS_LINES = 800, 100, 400
