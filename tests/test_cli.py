@@ -97,3 +97,58 @@ def test_capture_takes_a_built_in_scene_as_scan_does(tmp_path, monkeypatch, caps
     capture = Capture.load(out)
     assert capture.ground_truth.mask_hit.any()
     assert [type(o).__name__ for o in capture.scene.objects] == ["MeshObject"]
+
+
+# --- how the commands print: --help, --json, --quiet -------------------------------------------
+
+
+def _help_rows(argv: list[str], capsys, monkeypatch) -> list[str]:  # noqa: ANN001
+    """The lines of the commands panel of ``virtus ARGV --help`` at 80 columns."""
+    monkeypatch.setenv("COLUMNS", "80")
+    with pytest.raises(SystemExit) as exit_info:
+        main([*argv, "--help"])
+    assert exit_info.value.code == 0
+    text = capsys.readouterr().out
+    panel = text[text.index("Commands") :].splitlines()[1:]
+    return [line for line in panel if line.startswith("│")]
+
+
+@pytest.mark.parametrize("group", [[], ["dataset"], ["rig"]], ids=["virtus", "dataset", "rig"])
+def test_help_lists_each_command_on_one_line(group, capsys, monkeypatch) -> None:
+    import typer
+
+    from virtus.cli import app
+
+    rows = _help_rows(group, capsys, monkeypatch)
+    command = typer.main.get_command(app)
+    for name in group:
+        command = command.commands[name]
+    # one row per command, each starting with its name: no continuation line
+    names = [row.split()[1] for row in rows]
+    assert names == list(command.commands), rows
+    for row in rows:
+        name = row.split()[1]
+        full = command.commands[name].help or ""
+        first = " ".join(row.strip("│ ").split()[1:])
+        # the first sentence of the command's own help, whole
+        assert first.endswith(".") and " ".join(full.split()).startswith(first), (first, full)
+
+
+def test_a_commands_own_help_keeps_its_whole_text(capsys, monkeypatch) -> None:
+    monkeypatch.setenv("COLUMNS", "100")
+    with pytest.raises(SystemExit):
+        main(["demo", "--help"])
+    text = " ".join(capsys.readouterr().out.replace("│", " ").split())
+    assert "Run the paper's sphere experiment end to end." in text
+    assert "metrics.json records whether it ran and why." in text
+
+
+def test_every_command_takes_json_and_quiet() -> None:
+    from tests.cli.test_options import leaf_commands
+
+    missing = [
+        " ".join(path)
+        for path, command in leaf_commands()
+        if not {"--json", "--quiet"} <= {o for p in command.params for o in p.opts}
+    ]
+    assert not missing, f"commands without --json/--quiet: {missing}"

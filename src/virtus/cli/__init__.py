@@ -9,6 +9,7 @@ printed as one line on stderr, with exit status 2 and no traceback.
 from __future__ import annotations
 
 import errno
+import inspect
 import sys
 import warnings
 
@@ -29,17 +30,24 @@ def _register_commands() -> None:
     # One module per sub-command (import order = order in --help).
     from virtus.cli import (
         ablation_cmd,
+        acceptance_cmd,
         calibrate_cmd,
         capture_cmd,
         dataset_cmd,
         decode_cmd,
         demo_cmd,
+        design_cmd,
         evaluate_cmd,
         export_usd_cmd,
+        handeye_cmd,
         import_cmd,
+        learn_cmd,
         patterns_cmd,
+        predict_cmd,
         reconstruct_cmd,
+        report_cmd,
         rig_cmd,
+        robot_scan_cmd,
         scan_cmd,
         twin_cmd,
     )
@@ -55,15 +63,45 @@ def _register_commands() -> None:
         reconstruct_cmd,
         scan_cmd,
         evaluate_cmd,
+        robot_scan_cmd,
+        handeye_cmd,
         ablation_cmd,
+        predict_cmd,
+        design_cmd,
         dataset_cmd,
+        learn_cmd,
         twin_cmd,
         export_usd_cmd,
+        acceptance_cmd,
+        report_cmd,
     ):
         module.register(app)
 
 
 _register_commands()
+
+
+def _first_sentence(text: str) -> str:
+    """The first sentence of a help text's first paragraph, on one line."""
+    paragraph = " ".join(inspect.cleandoc(text).split("\n\n")[0].split())
+    end = paragraph.find(". ")
+    return paragraph if end < 0 else paragraph[: end + 1]
+
+
+def _one_line_help(group: typer.Typer) -> None:
+    """Each command of ``group`` (and of its sub-groups) is listed in the group's ``--help``
+    by the first sentence of its help, on one line (``short_help``); its own ``--help``
+    keeps the whole text."""
+    for info in group.registered_commands:
+        text = info.help or inspect.getdoc(info.callback) or ""
+        if info.short_help is None and text:
+            info.short_help = _first_sentence(text)
+    for sub in group.registered_groups:
+        if sub.typer_instance is not None:
+            _one_line_help(sub.typer_instance)
+
+
+_one_line_help(app)
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ANN001

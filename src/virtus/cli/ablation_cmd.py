@@ -7,11 +7,15 @@ from typing import Annotated
 
 import typer
 
-from virtus.cli.options import OverwriteOption, ScannerOptions, SeedOption, scanner_options
-
-
-def _names(text: str | None) -> list[str] | None:
-    return None if text is None else [part.strip() for part in text.split(",") if part.strip()]
+from virtus.cli.options import (
+    OverwriteOption,
+    ScannerOptions,
+    SeedOption,
+    names_option,
+    scanner_options,
+)
+from virtus.cli.output import JsonOption, Output, QuietOption, Summary
+from virtus.cli.report_cmd import NoReportOption, add_report
 
 
 @scanner_options("rig", "spp")
@@ -19,17 +23,23 @@ def ablation(
     *,
     out: Annotated[Path, typer.Option(help="Output directory.")] = Path("ablation"),
     materials: Annotated[
-        str | None,
-        typer.Option(help="Comma-separated sphere materials (matte,glossy,metal,reflective)."),
+        list[str] | None,
+        typer.Option(
+            help="Sphere materials (matte, glossy, metal, reflective), comma-separated or "
+            "repeated (--materials matte --materials metal); default: all."
+        ),
     ] = None,
     ambient: Annotated[
-        str | None, typer.Option(help="Comma-separated ambient levels (dark,ambient).")
+        list[str] | None,
+        typer.Option(
+            help="Ambient levels (dark, ambient), comma-separated or repeated; default: all."
+        ),
     ] = None,
     realism: Annotated[
-        str | None,
+        list[str] | None,
         typer.Option(
-            help="Comma-separated realism settings "
-            "(ideal,sensor,gamma,projector,interreflection,all)."
+            help="Realism settings (ideal, sensor, gamma, projector, interreflection, all), "
+            "comma-separated or repeated; default: all."
         ),
     ] = None,
     options: ScannerOptions,
@@ -42,44 +52,59 @@ def ablation(
             help="Continue an interrupted run in OUT (same settings): finished cells are kept.",
         ),
     ] = False,
+    json_out: JsonOption = False,
+    quiet: QuietOption = False,
+    no_report: NoReportOption = False,
 ) -> None:
-    """Render the 100 mm sphere for every cell, decode it, and report the phase error
+    """Measure the sphere over materials, ambient light and realism.
+
+    Render the 100 mm sphere for every cell, decode it, and report the phase error
     against the ground truth and the sphere-fit error: OUT/cells/*.json (one per finished
     cell), OUT/ablation.csv, ablation.json, ablation.png. OUT is owned by the run
     (OUT/run.json): another run's directory is refused unless --overwrite."""
-    from rich.console import Console
-    from rich.table import Table
-
     from virtus.pipeline.ablation import run_ablation
     from virtus.sensor import as_seed
 
     seed = as_seed(seed)
     scanner = options.build()
-    console = Console(stderr=True)
+    output = Output(json_out, quiet)
     rows = run_ablation(
         out,
         scanner,
-        materials=_names(materials),
-        ambients=_names(ambient),
-        realism=_names(realism),
+        materials=names_option(materials),
+        ambients=names_option(ambient),
+        realism=names_option(realism),
         seed=seed,
-        progress=lambda i, n, c: console.print(
-            f"[{i + 1}/{n}] {c.material}, {c.ambient}, {c.realism}", highlight=False
+        progress=lambda i, n, c: output.log(
+            f"[{i + 1}/{n}] {c.material}, {c.ambient}, {c.realism}"
         ),
         overwrite=overwrite,
         resume=resume,
     )
-    table = Table(title=f"virtus ablation -> {out}")
-    for column in ("material", "ambient", "realism", "valid", "phase RMS (rad)",
-                   "order errors", "radius error (mm)", "fit RMS (mm)"):  # fmt: skip
-        table.add_column(column)
-    for r in rows:
-        table.add_row(
-            r["material"], r["ambient"], r["realism"], f"{r['valid_fraction']:.1%}",
-            f"{r['phase_error_rms_rad']:.4f}", f"{r['order_error_fraction']:.2%}",
-            f"{r['radius_error_mm']:+.4f}", f"{r['fit_rms_mm']:.4f}",
-        )  # fmt: skip
-    Console().print(table)
+    summary = Summary({"directory": str(out), "cells": rows}, _print_ablation)
+    add_report(output, summary, out, no_report)
+    output.emit(summary)
+
+
+#: The table's columns: (title, key in a cell's row, format).
+_COLUMNS = (
+    ("material", "material", "s"), ("ambient", "ambient", "s"), ("realism", "realism", "s"),
+    ("valid", "valid_fraction", ".1%"), ("phase RMS (rad)", "phase_error_rms_rad", ".4f"),
+    ("order errors", "order_error_fraction", ".2%"),
+    ("radius error (mm)", "radius_error_mm", "+.4f"), ("fit RMS (mm)", "fit_rms_mm", ".4f"),
+)  # fmt: skip
+
+
+def _print_ablation(console, d) -> None:  # noqa: ANN001
+    from rich.table import Table
+
+    table = Table(title=f"virtus ablation -> {d['directory']}")
+    for title, _key, _spec in _COLUMNS:
+        table.add_column(title)
+    for row in d["cells"]:
+        table.add_row(*("-" if row.get(key) is None else format(row[key], spec)
+                        for _title, key, spec in _COLUMNS))  # fmt: skip
+    console.print(table)
 
 
 def register(app: typer.Typer) -> None:

@@ -18,8 +18,11 @@ from virtus.cli.options import (
     OverwriteOption,
     ScannerOptions,
     SeedOption,
+    once,
     scanner_options,
 )
+from virtus.cli.output import JsonOption, Output, QuietOption, Summary
+from virtus.cli.report_cmd import NoReportOption, add_report
 
 DEFAULT_OUT = Path("virtus-calibration")
 BOARD_HELP = (
@@ -49,10 +52,11 @@ FromPointsOption = Annotated[
     ),
 ]
 SizesOption = Annotated[
-    str | None,
+    list[str] | None,
     typer.Option(
+        metavar="CAMWxCAMH,PROJWxPROJH",
         help="With --from-points: camera and projector image sizes in px, "
-        "'CAMWxCAMH,PROJWxPROJH' (e.g. 960x960,912x1140); a run's episode.json gives them."
+        "'CAMWxCAMH,PROJWxPROJH' (e.g. 960x960,912x1140); a run's episode.json gives them.",
     ),
 ]
 DistortionOption = Annotated[
@@ -68,7 +72,7 @@ DistortionOption = Annotated[
 def calibrate(
     *,
     out: Annotated[Path, typer.Option(help="Output directory.")] = DEFAULT_OUT,
-    board: Annotated[str | None, typer.Option(help=BOARD_HELP)] = None,
+    board: Annotated[list[str] | None, typer.Option(metavar="SPEC", help=BOARD_HELP)] = None,
     captures: Annotated[
         list[Path] | None,
         typer.Option(
@@ -97,14 +101,17 @@ def calibrate(
             help="Continue an interrupted run in OUT (same settings) from its finished poses.",
         ),
     ] = False,
+    json_out: JsonOption = False,
+    quiet: QuietOption = False,
+    no_report: NoReportOption = False,
 ) -> None:
-    """Render the board in every pose (the whole pattern sequence each), calibrate camera,
+    """Calibrate a camera-projector rig.
+
+    Render the board in every pose (the whole pattern sequence each), calibrate camera,
     projector and their pose, and write OUT/calibration.json (+ OpenCV YAML and the
     paper's txt files). Identical runs write identical files; OUT/run.json records the
     run, OUT/timing.json its timings."""
     import warnings
-
-    from rich.console import Console
 
     from virtus.calib.result import CALIBRATION_FILE
     from virtus.capture.scandir import capture_dirs
@@ -118,55 +125,42 @@ def calibrate(
     from virtus.sensor import as_seed
 
     # Cheap checks first: nothing is read, rendered or written before they pass.
+    board, sizes = once(board, "--board"), once(sizes, "--sizes")
     the_board = _board_of(board, from_points, sizes, bool(captures or resume))
     if more_captures and not captures:
         raise InputError("arguments", "capture directories only after --captures", more_captures)
     if captures or from_points is not None:
         mode = "--captures" if captures else "--from-points"
         _refuse_rendering_options(options, mode, poses=poses, seed=seed)
+    if captures and resume:
+        raise InputError("--resume", "a rendered run (not --captures)", True)
     from_captures = capture_dirs([*captures, *(more_captures or [])]) if captures else None
     if from_captures is None and from_points is None:
         poses = check_pose_spec(poses)
         seed = as_seed(seed)
         scanner = options.build()
-    console = Console()
+    output = Output(json_out, quiet)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        with _progress_bar(console) as progress:
+        with _progress_bar(output) as progress:
+            common = {"out_dir": out, "overwrite": overwrite, "distortion": distortion.value}
             if from_points is not None:
-                points_run = {
-                    "out_dir": out,
-                    "overwrite": overwrite,
-                    "distortion": distortion.value,
-                }
-                result = calibrate_points(from_points, board=the_board, sizes=sizes, **points_run)
+                result = calibrate_points(from_points, board=the_board, sizes=sizes, **common)
             elif from_captures is not None:
-                if resume:
-                    raise InputError("--resume", "a rendered run (not --captures)", True)
                 result = calibrate_captures(
-                    from_captures,
-                    board=the_board,
-                    progress=progress,
-                    out_dir=out,
-                    overwrite=overwrite,
-                    distortion=distortion.value,
+                    from_captures, board=the_board, progress=progress, **common
                 )
             else:
                 result = calibrate_rig(
-                    scanner,
-                    board=the_board,
-                    poses=poses,
-                    rng=seed,
-                    progress=progress,
-                    out_dir=out,
-                    resume=resume,
-                    overwrite=overwrite,
-                    distortion=distortion.value,
-                )
+                    scanner, board=the_board, poses=poses, rng=seed, progress=progress,
+                    resume=resume, **common,
+                )  # fmt: skip
     for warning in caught:
-        console.print(f"[yellow]warning:[/yellow] {warning.message}")
-    _print_summary(console, result.to_dict())
-    console.print(f"wrote {out / CALIBRATION_FILE}")
+        output.warn(str(warning.message))
+    summary = Summary(result.to_dict(), _print_summary)
+    summary.add("calibration_file", str(out / CALIBRATION_FILE), f"wrote {out / CALIBRATION_FILE}")
+    add_report(output, summary, out, no_report)
+    output.emit(summary)
 
 
 def _board_of(board: str | None, from_points: Path | None, sizes: str | None, other: bool) -> Any:
@@ -219,19 +213,21 @@ def _refuse_rendering_options(options: ScannerOptions, mode: str, **given: Any) 
 
 
 @contextlib.contextmanager
-def _progress_bar(console: Any) -> Iterator[Callable[[int, int, str], None]]:
-    """A progress bar of the captured poses, shown while the block runs; yields the
-    ``progress(done, total, name)`` callback of the calibration jobs."""
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+def _progress_bar(output: Output) -> Iterator[Callable[[int, int, str], None]]:
+    """A progress bar of the captured poses on stderr (on a terminal only), shown while the
+    block runs; yields the ``progress(done, total, name)`` callback of the calibration jobs."""
+    from rich.progress import BarColumn, TextColumn, TimeElapsedColumn
 
-    with Progress(
+    with output.progress(
         TextColumn("[bold]capture"),
         BarColumn(),
         TextColumn("{task.completed}/{task.total}"),
         TextColumn("{task.description}"),
         TimeElapsedColumn(),
-        console=console,
     ) as bar:
+        if bar is None:
+            yield lambda done, total, name: None
+            return
         task = bar.add_task("", total=None)
 
         def progress(done: int, total: int, name: str) -> None:

@@ -13,6 +13,7 @@ from virtus.cli.options import (
     SeedOption,
     scanner_options,
 )
+from virtus.cli.output import JsonOption, Output, QuietOption, Summary
 
 
 @scanner_options()
@@ -34,8 +35,12 @@ def capture(
         bool,
         typer.Option("--resume", help="Finish an interrupted run in OUT (same settings)."),
     ] = False,
+    json_out: JsonOption = False,
+    quiet: QuietOption = False,
 ) -> None:
-    """Render the pattern sequence for one pose; write OUT/frames/000.png ...,
+    """Render one pose of a scene into a capture.
+
+    Render the pattern sequence for one pose; write OUT/frames/000.png ...,
     OUT/capture.json (rig, pose, patterns, sensor, seed, scene, settings) and OUT/gt/*.npy
     ground truth. OUT is owned by the run (OUT/run.json): another run's directory is
     refused unless --overwrite."""
@@ -47,37 +52,60 @@ def capture(
     result = capture_scene(
         options.build(), scene, out, seed=seed, overwrite=overwrite, resume=resume
     )
-    timing = result.timing_s
-    _summary(result.capture, out / "capture.json", timing["render_s"], timing["write_s"])
+    output = Output(json_out, quiet)
+    output.emit(Summary(_summary(result.capture, out, result.timing_s), _print_capture))
 
 
 def register(app: typer.Typer) -> None:
     app.command("capture")(capture)
 
 
-def _summary(capture, manifest: Path, render_s: float, write_s: float) -> None:  # noqa: ANN001
-    from rich.console import Console
-    from rich.table import Table
-
+def _summary(capture, out: Path, timing: dict[str, float]) -> dict:  # noqa: ANN001
+    """The capture's summary (frames, render settings and speed, pixel classes)."""
     frames = capture.frames
     gt = capture.ground_truth
     settings = capture.render
-    table = Table(title=f"virtus capture -> {manifest.parent}", show_header=False)
+    render_s = timing["render_s"]
+    return {
+        "directory": str(out),
+        "frames": int(frames.shape[0]),
+        "width": int(frames.shape[2]),
+        "height": int(frames.shape[1]),
+        "bit_depth": int(capture.bit_depth),
+        "render_s": render_s,
+        "frames_per_s": frames.shape[0] / render_s if render_s > 0 else None,
+        "spp": settings["spp"],
+        "lookup": settings["lookup"],
+        "mitsuba_variant": settings["mitsuba_variant"],
+        "write_s": timing["write_s"],
+        "exposure_dn_per_radiance": settings["exposure_dn_per_radiance"],
+        "pixels": {
+            "hit": float(gt.mask_hit.mean()),
+            "shadowed": float(gt.mask_shadow.mean()),
+            "outside_projector": float(gt.mask_outside.mean()),
+            "valid": float(gt.mask.mean()),
+        },
+    }
+
+
+def _print_capture(console, d) -> None:  # noqa: ANN001
+    from rich.table import Table
+
+    table = Table(title=f"virtus capture -> {d['directory']}", show_header=False)
     table.add_row(
-        "frames",
-        f"{frames.shape[0]} x {frames.shape[2]} x {frames.shape[1]} px, {capture.bit_depth}-bit",
+        "frames", f"{d['frames']} x {d['width']} x {d['height']} px, {d['bit_depth']}-bit"
     )
-    rate = f"{frames.shape[0] / render_s:.1f} frames/s, " if render_s > 0 else "kept, "
+    rate = "kept, " if d["frames_per_s"] is None else f"{d['frames_per_s']:.1f} frames/s, "
     table.add_row(
         "render",
-        f"{render_s:.2f} s ({rate}"
-        f"{settings['spp']} spp, {settings['lookup']}, {settings['mitsuba_variant']})",
+        f"{d['render_s']:.2f} s ({rate}{d['spp']} spp, {d['lookup']}, {d['mitsuba_variant']})",
     )
-    table.add_row("write", f"{write_s:.2f} s (PNG + ground truth)")
-    table.add_row("exposure", f"{settings['exposure_dn_per_radiance']:.4g} DN per unit radiance")
+    table.add_row("write", f"{d['write_s']:.2f} s (PNG + ground truth)")
+    table.add_row("exposure", f"{d['exposure_dn_per_radiance']:.4g} DN per unit radiance")
+    px = d["pixels"]
     table.add_row(
         "pixels",
-        f"hit {gt.mask_hit.mean():.1%}, shadowed {gt.mask_shadow.mean():.1%}, "
-        f"outside projector {gt.mask_outside.mean():.1%}, valid {gt.mask.mean():.1%}",
+        f"hit {px['hit']:.1%}, shadowed {px['shadowed']:.1%}, "
+        f"outside projector {px['outside_projector']:.1%}, valid {px['valid']:.1%}",
     )
-    Console().print(table)
+    console.print(table)

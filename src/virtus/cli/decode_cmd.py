@@ -8,6 +8,8 @@ from typing import Annotated
 
 import typer
 
+from virtus.cli.output import JsonOption, Output, QuietOption, Summary
+
 
 def register(app: typer.Typer) -> None:
     @app.command("decode")
@@ -29,19 +31,21 @@ def register(app: typer.Typer) -> None:
             bool,
             typer.Option("--repair", help="Repair fringe orders that disagree with the phase."),
         ] = False,
+        json_out: JsonOption = False,
+        quiet: QuietOption = False,
     ) -> None:
-        """Decode DIR/frames into DIR/decoded/: phase_v.npy, phase_h.npy (absolute phase, rad),
+        """Decode a capture into projector coordinates.
+
+        Decode DIR/frames into DIR/decoded/: phase_v.npy, phase_h.npy (absolute phase, rad),
         proj_uv.npy (H, W, 2 projector px), mask.npy, modulation.npy, flagged.npy (likely
         fringe-order errors), summary.json; NaN where invalid. Warns when many valid pixels
         are flagged: the sequence description probably does not match the frames. No valid
         pixel at all (black, saturated or wrongly scaled frames) is an error (exit 2) that
         says why; nothing is written then. Holds DIR's lock while writing."""
-        from rich.console import Console
-        from rich.table import Table
-
         from virtus.capture import scandir as layout
         from virtus.pipeline.scan import decode_capture
 
+        output = Output(json_out, quiet)
         start = time.perf_counter()
         decoded = decode_capture(
             directory,
@@ -49,18 +53,37 @@ def register(app: typer.Typer) -> None:
             saturation_level=saturation_level,
             repair=repair,
         )
-        elapsed = time.perf_counter() - start
         mask = decoded.mask
-        table = Table(title=f"virtus decode -> {directory / layout.DECODED_DIR}", show_header=False)
-        table.add_row("pixels decoded", f"{int(mask.sum())} of {mask.size} ({mask.mean():.1%})")
-        for name, valid in (("vertical fringes (u_p)", decoded.mask_v),
-                            ("horizontal fringes (v_p)", decoded.mask_h)):  # fmt: skip
-            table.add_row(name, f"{valid.mean():.1%} valid")
+        valid = int(mask.sum())
         flagged = int(decoded.flagged.sum())
-        table.add_row(
-            "flagged (likely order errors)",
-            f"{flagged} ({flagged / max(int(mask.sum()), 1):.2%} of decoded pixels)",
-        )
-        table.add_row("summary", str(directory / layout.DECODED_DIR / layout.DECODE_SUMMARY))
-        table.add_row("time", f"{elapsed:.2f} s")
-        Console().print(table)
+        data = {
+            "directory": str(directory / layout.DECODED_DIR),
+            "pixels_decoded": valid,
+            "pixels": int(mask.size),
+            "decoded_fraction": float(mask.mean()),
+            "valid_fraction_v": float(decoded.mask_v.mean()),
+            "valid_fraction_h": float(decoded.mask_h.mean()),
+            "flagged": flagged,
+            "flagged_fraction": flagged / max(valid, 1),
+            "summary": str(directory / layout.DECODED_DIR / layout.DECODE_SUMMARY),
+            "time_s": time.perf_counter() - start,
+        }
+        output.emit(Summary(data, _print_decode))
+
+
+def _print_decode(console, d) -> None:  # noqa: ANN001
+    from rich.table import Table
+
+    table = Table(title=f"virtus decode -> {d['directory']}", show_header=False)
+    table.add_row(
+        "pixels decoded", f"{d['pixels_decoded']} of {d['pixels']} ({d['decoded_fraction']:.1%})"
+    )
+    table.add_row("vertical fringes (u_p)", f"{d['valid_fraction_v']:.1%} valid")
+    table.add_row("horizontal fringes (v_p)", f"{d['valid_fraction_h']:.1%} valid")
+    table.add_row(
+        "flagged (likely order errors)",
+        f"{d['flagged']} ({d['flagged_fraction']:.2%} of decoded pixels)",
+    )
+    table.add_row("summary", d["summary"])
+    table.add_row("time", f"{d['time_s']:.2f} s")
+    console.print(table)

@@ -8,6 +8,8 @@ from typing import Annotated
 
 import typer
 
+from virtus.cli.output import JsonOption, Output, QuietOption, Summary
+
 
 def register(app: typer.Typer) -> None:
     @app.command("export-usd")
@@ -30,8 +32,12 @@ def register(app: typer.Typer) -> None:
             Path | None,
             typer.Option(help="Image the projector shows (its size); default: full white."),
         ] = None,
+        json_out: JsonOption = False,
+        quiet: QuietOption = False,
     ) -> None:
-        """Write a USD stage: the camera (USD lens values in tenths of a scene unit, OpenCV
+        """Write a scene and a rig as a USD stage for Isaac Sim.
+
+        Write a USD stage: the camera (USD lens values in tenths of a scene unit, OpenCV
         distortion in Omniverse's lens-distortion attributes), the projector as a RectLight
         (isProjector) and the scene's objects with UsdPreviewSurface materials, in Isaac's
         world (camera looking along +X, +Z up)."""
@@ -50,4 +56,6 @@ def register(app: typer.Typer) -> None:
         path = export_usd(
             out, scene=the_scene, rig=the_rig, meters_per_unit=meters_per_unit, pattern=image
         )
-        typer.echo(f"wrote {path} (metersPerUnit {meters_per_unit:g})")
+        summary = Summary({"stage": str(path), "meters_per_unit": meters_per_unit})
+        summary.lines.append(f"wrote {path} (metersPerUnit {meters_per_unit:g})")
+        Output(json_out, quiet).emit(summary)

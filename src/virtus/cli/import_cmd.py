@@ -14,6 +14,7 @@ from virtus.cli.options import (
     UnitsOption,
     parse_size,
 )
+from virtus.cli.output import JsonOption, Output, QuietOption, Summary
 
 
 def import_(
@@ -51,42 +52,68 @@ def import_(
         bool,
         typer.Option("--resume", help="Finish an interrupted import into OUT (same inputs)."),
     ] = False,
+    json_out: JsonOption = False,
+    quiet: QuietOption = False,
 ) -> None:
-    """Import IMAGES as a capture in OUT (the layout of virtus capture, without ground
+    """Import a real bench's images as a capture.
+
+    Import IMAGES as a capture in OUT (the layout of virtus capture, without ground
     truth); then `virtus decode OUT`, `virtus reconstruct OUT` work on it. OUT is owned
     by the run (OUT/run.json, with the inputs' checksums): another run's directory is
     refused unless --overwrite."""
-    from rich.console import Console
-    from rich.table import Table
-
     from virtus.pipeline.capture import import_images
 
+    output = Output(json_out, quiet)
     size = parse_size(camera_size)
     result = import_images(
         images, sequence, calibration, out, units=units and units.value, bit_depth=bit_depth,
         camera_size=size, pixel_size_um=pixel_size_um, overwrite=overwrite, resume=resume,
     )  # fmt: skip
-    table = Table(title=f"virtus import -> {out}", show_header=False)
     capture = result.capture
     frames = capture.frames
+    calibrated = result.sources.calibrated
+    data = {
+        "directory": str(out),
+        "frames": int(frames.shape[0]),
+        "width": int(frames.shape[2]),
+        "height": int(frames.shape[1]),
+        "bit_depth": int(capture.bit_depth),
+        "full_scale": int(capture.full_scale),
+        "sequence": str(sequence),
+        "sequence_frames": len(result.sequence),
+        "calibration": str(calibration) if calibrated else None,
+        "calibration_format": result.sources.format if calibrated else None,
+        "baseline_mm": result.rig.baseline_m * 1e3 if calibrated else None,
+        # where each rig parameter came from, as the lines print it
+        "sources": [[label, text] for label, text in result.sources.lines()],
+        "pixel_size_um": pixel_size_um,
+    }
+    summary = Summary(data, _print_import)
+    summary.lines += [f"{label}: {text}" for label, text in data["sources"]]
+    if pixel_size_um is not None:
+        summary.lines.append(
+            f"camera pixel size: {pixel_size_um:g} um (recorded for a digital twin)"
+        )
+    summary.lines.append(f"next: virtus decode {out}")
+    output.emit(summary)
+
+
+def _print_import(console, d) -> None:  # noqa: ANN001
+    from rich.table import Table
+
+    table = Table(title=f"virtus import -> {d['directory']}", show_header=False)
     table.add_row(
         "frames",
-        f"{frames.shape[0]} x {frames.shape[2]} x {frames.shape[1]} px, "
-        f"{capture.bit_depth}-bit (full scale {capture.full_scale})",
+        f"{d['frames']} x {d['width']} x {d['height']} px, "
+        f"{d['bit_depth']}-bit (full scale {d['full_scale']})",
     )
-    table.add_row("sequence", f"{sequence} ({len(result.sequence)} frames)")
-    if result.sources.calibrated:
-        baseline = f"baseline {result.rig.baseline_m * 1e3:.2f} mm"
-        table.add_row("calibration", f"{calibration} ({baseline}, {result.sources.format})")
+    table.add_row("sequence", f"{d['sequence']} ({d['sequence_frames']} frames)")
+    if d["calibration"] is not None:
+        baseline = f"baseline {d['baseline_mm']:.2f} mm"
+        table.add_row("calibration", f"{d['calibration']} ({baseline}, {d['calibration_format']})")
     else:
         table.add_row("calibration", "none: a placeholder rig (decode, calibrate --captures)")
-    Console().print(table)
-    # One plain line per parameter source (never wrapped: paths stay whole).
-    for label, text in result.sources.lines():
-        typer.echo(f"{label}: {text}")
-    if pixel_size_um is not None:
-        typer.echo(f"camera pixel size: {pixel_size_um:g} um (recorded for a digital twin)")
-    Console().print(f"next: virtus decode {out}")
+    console.print(table)
 
 
 def register(app: typer.Typer) -> None:

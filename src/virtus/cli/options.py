@@ -53,9 +53,10 @@ UnitsOption = Annotated[
     typer.Option(help="Length unit of a calibration file that states none: mm or m."),
 ]
 #: ``--camera-size W,H``: the camera's image size (pixels), for a calibration that lacks it;
-#: parsed by :func:`parse_size`.
+#: parsed by :func:`parse_size`. Options whose one value holds commas are declared as lists
+#: so that a repetition is seen and refused (:func:`once`), never last-wins.
 CameraSizeOption = Annotated[
-    str | None,
+    list[str] | None,
     typer.Option(
         "--camera-size",
         metavar="W,H",
@@ -100,13 +101,21 @@ BouncesOption = Annotated[
     typer.Option(help="Light bounces that see the projector (1 = direct; 2+ = interreflections)."),
 ]
 ProjectorLensOption = Annotated[
-    str | None,
-    typer.Option(help="Projector thin lens 'APERTURE_M,FOCUS_M' (defocus); default: pinhole."),
+    list[str] | None,
+    typer.Option(
+        metavar="APERTURE_M,FOCUS_M",
+        help="Projector thin lens 'APERTURE_M,FOCUS_M' (defocus); default: pinhole.",
+    ),
 ]
 CameraLensOption = Annotated[
-    str | None,
-    typer.Option(help="Camera thin lens 'APERTURE_M,FOCUS_M' (depth of field); default: pinhole."),
+    list[str] | None,
+    typer.Option(
+        metavar="APERTURE_M,FOCUS_M",
+        help="Camera thin lens 'APERTURE_M,FOCUS_M' (depth of field); default: pinhole.",
+    ),
 ]
+#: Scanner options that take one value holding commas (declared as lists: see :func:`once`).
+_ONE_VALUE = {"projector_lens": "--projector-lens", "camera_lens": "--camera-lens"}
 VariantOption = Annotated[
     str | None, typer.Option(help="Mitsuba variant (default: CUDA if it works, else LLVM).")
 ]
@@ -197,6 +206,9 @@ def scanner_options(
 
         def wrapper(**kwargs: Any) -> Any:
             values = {name: kwargs.pop(name) for name in chosen}
+            for name, option in _ONE_VALUE.items():
+                if name in values:
+                    values[name] = once(values[name], option)
             return command(**kwargs, **{BUNDLE_PARAMETER: ScannerOptions(**values)})
 
         for attribute in ("__module__", "__name__", "__qualname__", "__doc__"):
@@ -241,10 +253,38 @@ def load_sequence_option(path: Path | None, width: int, height: int):  # noqa: A
     return sequence
 
 
-def parse_size(text: str | None, option: str = "--camera-size") -> tuple[int, int] | None:
-    """``(width, height)`` from ``'W,H'`` (or ``'WxH'``), both at least 1 px, or None."""
+def once(values: str | list[str] | tuple[str, ...] | None, option: str) -> str | None:
+    """The one value of ``option``, an option that takes a single value holding commas
+    (``--camera-size 64,48``), declared as a list so that giving it twice is refused by
+    name rather than the last one silently winning; None when it was not given."""
     from virtus.errors import InputError
 
+    if values is None or isinstance(values, str):
+        return values
+    if len(values) > 1:
+        given = " ".join(f"{option} {value}" for value in values)
+        raise InputError(option, "the option once (it takes one value)", given)
+    return values[0] if values else None
+
+
+def names_option(values: list[str] | None) -> list[str] | None:
+    """The names of a list option given comma-separated, repeated, or both
+    (``--materials matte,glossy --materials metal`` -> ``[matte, glossy, metal]``), in order;
+    None when it was not given. Empty parts are dropped (``--materials ,`` gives ``[]``,
+    which the job refuses, naming the option)."""
+    if not values:
+        return None
+    return [part.strip() for value in values for part in value.split(",") if part.strip()]
+
+
+def parse_size(
+    text: str | list[str] | None, option: str = "--camera-size"
+) -> tuple[int, int] | None:
+    """``(width, height)`` from ``'W,H'`` (or ``'WxH'``), both at least 1 px, or None; a
+    list (the option given several times) is refused (:func:`once`)."""
+    from virtus.errors import InputError
+
+    text = once(text, option)
     if text is None:
         return None
     parts = text.replace("x", ",").replace("X", ",").split(",")
@@ -257,11 +297,12 @@ def parse_size(text: str | None, option: str = "--camera-size") -> tuple[int, in
     return width, height
 
 
-def parse_lens(text: str | None, option: str):  # noqa: ANN201
+def parse_lens(text: str | list[str] | None, option: str):  # noqa: ANN201
     """A :class:`virtus.geometry.optics.ThinLens` from ``'APERTURE_M,FOCUS_M'``, or None."""
     from virtus.errors import InputError
     from virtus.geometry import ThinLens
 
+    text = once(text, option)
     if text is None:
         return None
     parts = text.split(",")

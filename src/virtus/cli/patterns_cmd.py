@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from virtus.cli.options import SequenceOption
+from virtus.cli.output import JsonOption, Output, QuietOption, Summary
 
 
 def register(app: typer.Typer) -> None:
@@ -21,8 +22,12 @@ def register(app: typer.Typer) -> None:
         height: Annotated[
             int, typer.Option(help="Projector height, px (the default sequence).")
         ] = 1140,
+        json_out: JsonOption = False,
+        quiet: QuietOption = False,
     ) -> None:
-        """Write a sequence's frames as DIR/000.png ... (what the projector shows, 8-bit) and
+        """Write a pattern sequence as PNG frames.
+
+        Write a sequence's frames as DIR/000.png ... (what the projector shows, 8-bit) and
         DIR/sequence.json, the description every job reads with --sequence. Default: the
         paper's 52 frames (18-step phase shift, T = 18 px, 6-bit Gray + complementary,
         vertical and horizontal, white, black); --sequence FILE writes that sequence."""
@@ -37,7 +42,17 @@ def register(app: typer.Typer) -> None:
             Intrinsics(1.0, 1.0, 0.0, 0.0, width, height)
             the_sequence = default_sequence(width, height)
         path = the_sequence.save(out)
-        typer.echo(
-            f"wrote {len(the_sequence)} frames ({the_sequence.width} x {the_sequence.height} "
-            f"px, 8-bit) and {path}"
+        data = {
+            "frames": len(the_sequence),
+            "width": the_sequence.width,
+            "height": the_sequence.height,
+            "bit_depth": 8,
+            "directory": str(out),
+            "sequence": str(path),
+        }
+        summary = Summary(data)
+        summary.lines.append(
+            f"wrote {data['frames']} frames ({data['width']} x {data['height']} px, 8-bit) "
+            f"and {path}"
         )
+        Output(json_out, quiet).emit(summary)

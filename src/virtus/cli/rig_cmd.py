@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+
+from virtus.cli.output import JsonOption, Output, QuietOption, Summary
 
 #: The paper's camera sensor: 20.9995 mm aperture over 960 px.
 from virtus.paper import CAMERA_PIXEL_SIZE_MM as PAPER_PIXEL_SIZE_MM
@@ -21,25 +22,26 @@ def register(app: typer.Typer) -> None:
         rig: Annotated[
             Path | None, typer.Option(help="Rig or calibration JSON; default: the paper's rig.")
         ] = None,
-        json_out: Annotated[bool, typer.Option("--json", help="Print JSON only.")] = False,
         pixel_size_mm: Annotated[
             float, typer.Option(help="Camera pixel size for the Isaac parameters, mm.")
         ] = PAPER_PIXEL_SIZE_MM,
+        json_out: JsonOption = False,
+        quiet: QuietOption = False,
     ) -> None:
-        """Print the rig (DESIGN schema), Isaac Sim camera parameters and projected size."""
+        """Print a rig, its Isaac Sim camera and projected size.
+
+        The rig in the DESIGN schema (camera, projector, proj2cam), the Isaac Sim camera
+        parameters for the pixel size and the projected size at 1 m; --json prints the
+        same as one JSON object (a rig file other tools read)."""
         from virtus.cli.options import load_rig_option
         from virtus.geometry import rig_info
 
         the_rig = load_rig_option(rig)
         data = rig_info(the_rig, pixel_size_mm)
-        if json_out:
-            typer.echo(json.dumps(data, indent=2))
-            return
-        _print_table(data)
+        Output(json_out, quiet).emit(Summary(data, _print_table))
 
 
-def _print_table(data: dict[str, Any]) -> None:
-    from rich.console import Console
+def _print_table(console: Any, data: dict[str, Any]) -> None:
     from rich.table import Table
 
     table = Table(title="virtus rig", show_header=True)
@@ -58,7 +60,6 @@ def _print_table(data: dict[str, Any]) -> None:
             f"{K[0][2]:.3f}, {K[1][2]:.3f}",
             " ".join(f"{d:.4g}" for d in dev["dist"]),
         )
-    console = Console()
     console.print(table)
     t = data["proj2cam"]["t"]
     console.print(f"proj2cam t (projector centre in camera frame): {t} m")

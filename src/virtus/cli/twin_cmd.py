@@ -8,10 +8,11 @@ from typing import Annotated, Any
 
 import typer
 
-from virtus.cli.options import CameraSizeOption, PixelSizeOption, UnitsOption, parse_size
+from virtus.cli.options import CameraSizeOption, PixelSizeOption, UnitsOption, once, parse_size
+from virtus.cli.output import JsonOption, Output, QuietOption, Summary
 
 ProjectorSizeOption = Annotated[
-    str | None,
+    list[str] | None,
     typer.Option(
         "--projector-size",
         metavar="W,H",
@@ -33,7 +34,8 @@ ValidateOption = Annotated[
     typer.Option(
         "--validate",
         help="Real calibration captures (directories or folders of them) to re-render "
-        "with the twin and compare; more may follow as arguments.",
+        "with the twin and compare (a board the calibration file does not pose is posed "
+        "from both devices); more may follow as arguments.",
     ),
 ]
 MoreOption = Annotated[
@@ -61,10 +63,18 @@ GEOMETRY_COLUMNS = (
 LIGHT_COLUMNS = ("white_rms", "black_rms", "fringe_rms", "code_rms", "point_noise_ratio")
 
 
-def _print_validation(console: Any, result: Any, path: Path) -> None:
+def _print_twin(console: Any, data: dict[str, Any]) -> None:
+    """The twin's files, then its validation (when it ran) from the summary."""
+    for path in data["written"].values():
+        console.print(f"wrote {path}", markup=False, soft_wrap=True)
+    if data["validation"] is not None:
+        _print_validation(console, data["validation"])
+
+
+def _print_validation(console: Any, result: dict[str, Any]) -> None:
     from rich.table import Table
 
-    rows = [*result.per_pose, {"name": "overall", **result.overall}]
+    rows = [*result["per_pose"], {"name": "overall", **result["overall"]}]
     for title, columns in (
         ("real - twin", GEOMETRY_COLUMNS),
         ("real - twin, light", LIGHT_COLUMNS),
@@ -77,9 +87,10 @@ def _print_validation(console: Any, result: Any, path: Path) -> None:
             table.add_row(row["name"], *(f"{row.get(c, float('nan')):.4f}" for c in columns))
         console.print(table)
     console.print(
-        f"paper: real-to-virtual MAE {result.overall['paper_cloud_mae_mm']} mm; wrote {path}"
+        f"paper: real-to-virtual MAE {result['overall']['paper_cloud_mae_mm']} mm; "
+        f"wrote {result['file']}"
     )
-    for name, reason in result.dropped.items():
+    for name, reason in result["dropped"].items():
         console.print(f"[yellow]dropped {name}:[/yellow] {reason}")
 
 
@@ -100,7 +111,8 @@ def register(app: typer.Typer) -> None:
         sensor: PriorSensorOption = None,
         projector: PriorProjectorOption = None,
         board: Annotated[
-            str | None, typer.Option(help="Board spec (default: the calibration file's).")
+            list[str] | None,
+            typer.Option(metavar="SPEC", help="Board spec (default: the calibration file's)."),
         ] = None,
         meters_per_unit: Annotated[
             float, typer.Option(help="The stage's metersPerUnit (1 = metres, 0.01 = cm).")
@@ -110,16 +122,18 @@ def register(app: typer.Typer) -> None:
         camera_size: CameraSizeOption = None,
         projector_size: ProjectorSizeOption = None,
         pixel_size_um: PixelSizeOption = None,
+        json_out: JsonOption = False,
+        quiet: QuietOption = False,
     ) -> None:
-        """Write OUT/rig.json, OUT/isaac.json (Isaac Sim parameters in USD's convention:
+        """Build a digital twin of a rig for Isaac Sim.
+
+        Write OUT/rig.json, OUT/isaac.json (Isaac Sim parameters in USD's convention:
         lens and film values in tenths of a scene unit, metersPerUnit, lens distortion,
         projector RectLight size at 1 m, poses in Isaac's world) and, with usd-core,
         OUT/twin.usda. With --fit, fit the twin's light (projector gamma and blur,
         vignetting and fall-off, exposure, ambient level, gain and noise) to real captures.
         With --validate, re-render every captured pose with the twin and write
         OUT/validation.json."""
-        from rich.console import Console
-
         from virtus.errors import InputError
         from virtus.pipeline.twin import (
             VALIDATION_FILE,
@@ -128,6 +142,7 @@ def register(app: typer.Typer) -> None:
             write_twin,
         )
 
+        board = once(board, "--board")
         extra = list(more_captures or [])
         if extra and not (validate or fit):
             raise InputError("arguments", "captures after --fit or --validate", extra)
@@ -140,7 +155,7 @@ def register(app: typer.Typer) -> None:
             )
         fits = [*(fit or []), *(extra if not validate else [])]
         unit = None if units is None else units.value
-        console = Console()
+        output = Output(json_out, quiet)
         validated = [*validate, *(extra if not fit else [])] if validate else []
         if validate:  # refuse bad validation inputs before the twin is written
             check_validation(calibration, validated, board=board, units=unit)
@@ -153,9 +168,9 @@ def register(app: typer.Typer) -> None:
             camera_size=parse_size(camera_size),
             projector_size=parse_size(projector_size, "--projector-size"), **pitch,
         )  # fmt: skip
-        for path in written.values():
-            console.print(f"wrote {path}")
+        data: dict[str, Any] = {"written": dict(written), "validation": None}
         if not validate:
+            output.emit(Summary(data, _print_twin))
             return
         result = validate_twin(
             calibration,
@@ -166,4 +181,10 @@ def register(app: typer.Typer) -> None:
             units=unit,
             twin=out if fits else None,
         )
-        _print_validation(console, result, out / VALIDATION_FILE)
+        data["validation"] = {
+            "per_pose": list(result.per_pose),
+            "overall": dict(result.overall),
+            "dropped": dict(result.dropped),
+            "file": str(out / VALIDATION_FILE),
+        }
+        output.emit(Summary(data, _print_twin))

@@ -13,6 +13,12 @@
    the same fit with the true rig is reported for reference;
 5. ``DIR/metrics.json`` (metrics, the config used, provenance) next to the paper's numbers.
 
+When the scanner differs *physically* from the ideal one (its sensor, projector or render
+settings differ in a parameter, not only in a name: :func:`ideal_reference`), the same
+demo runs again with the ideal sensor and projector in ``DIR/ideal/`` (a demo of its own),
+so what the realism costs is measured; ``metrics.json``'s ``ideal_reference`` records
+whether it ran and why. The default demo is ideal: one experiment.
+
 ``DIR`` is owned by the run (:func:`virtus.io.runs.claim_run`, command ``demo``): another
 run's directory is refused unless ``overwrite``; ``resume`` continues an interrupted demo
 (finished calibration poses and a complete sphere capture are kept). ``DIR/calibration/``
@@ -23,7 +29,7 @@ from __future__ import annotations
 
 import platform
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +43,8 @@ from virtus.pipeline.scan import ScanSettings, scan_into
 from virtus.reconstruct import check_baseline, reconstruct
 from virtus.scanner import Scanner
 
-__all__ = ["PAPER", "DemoConfig", "DemoResult", "run_demo"]
+__all__ = ["IDEAL_DIR", "PAPER", "DemoConfig", "DemoResult", "IdealReference",
+           "ideal_reference", "run_demo"]  # fmt: skip
 
 #: The paper's reported numbers.
 PAPER = paper.DEMO
@@ -48,6 +55,8 @@ COMMAND = "demo"
 #: Sub-directories: the calibration run and the sphere scan.
 CALIBRATION_DIR = "calibration"
 SCAN_DIR = "scan"
+#: Sub-directory of the ideal reference (a demo of its own), run for a realistic scanner.
+IDEAL_DIR = "ideal"
 METRICS_FILE = "metrics.json"
 ERROR_MAP_FILE = f"{SCAN_DIR}/sphere_radial_error.npy"
 #: Files of the job (an earlier run's when found without a ``run.json``).
@@ -86,12 +95,89 @@ class DemoConfig:
 
 @dataclass(frozen=True, eq=False)
 class DemoResult:
-    """Outcome of :func:`run_demo`: ``metrics`` is the content of ``metrics.json``."""
+    """Outcome of :func:`run_demo`: ``metrics`` is the content of ``metrics.json``;
+    ``reference`` the ideal reference's (``DIR/ideal/metrics.json``), or None where it did
+    not run."""
 
     out_dir: Path
     metrics: dict[str, Any]
     sphere: SphereFit
     calibration: Any
+    reference: dict[str, Any] | None = None
+
+
+#: Keys of a device model's ``to_dict`` that are labels, not physics (never compared).
+_LABELS = frozenset({"name"})
+
+
+@dataclass(frozen=True)
+class IdealReference:
+    """Whether a demo's scanner needs the ideal reference beside it (:func:`ideal_reference`).
+
+    Attributes
+    ----------
+    scanner : the ideal scanner: the same rig, sequence, spp and variant, with the ideal
+        sensor and projector (:class:`~virtus.sensor.camera.Sensor` and
+        :class:`~virtus.sensor.projector.ProjectorModel` defaults), direct light, pinholes.
+    differences : the physical parameters in which the demo's scanner differs from it, as
+        ``"sensor.dark_noise_e: 6.8 (ideal: 0.0)"``; empty when it is the ideal one.
+    """
+
+    scanner: Scanner
+    differences: tuple[str, ...]
+
+    @property
+    def needed(self) -> bool:
+        """Whether the scanner differs physically from the ideal one."""
+        return bool(self.differences)
+
+    @property
+    def reason(self) -> str:
+        """Why the reference runs or not, in words."""
+        if not self.needed:
+            return (
+                "the scanner is physically the ideal one: its sensor, projector and render "
+                "settings equal the ideal models parameter by parameter (names are not compared)"
+            )
+        shown = "; ".join(self.differences[:8])
+        more = f"; and {len(self.differences) - 8} more" if len(self.differences) > 8 else ""
+        return f"the scanner differs physically from the ideal one: {shown}{more}"
+
+    def to_dict(self, ran: bool) -> dict[str, Any]:
+        """The record in ``metrics.json`` (``ideal_reference``)."""
+        return {
+            "ran": ran,
+            "reason": self.reason,
+            "differences": list(self.differences),
+            "metrics": f"{IDEAL_DIR}/{METRICS_FILE}" if ran else None,
+        }
+
+
+def ideal_reference(scanner: Scanner) -> IdealReference:
+    """The ideal scanner of ``scanner`` and the physical parameters in which they differ:
+    the sensor's, the projector's (``to_dict`` less their ``name``, a label) and the render
+    settings'. A sensor named ``"ideal"`` with every default parameter is the ideal sensor;
+    a sensor named ``"ideal"`` with a noise parameter changed is not."""
+    render = scanner.render.with_(
+        bounces=1, projector_lens=None, camera_lens=None, aperture_samples=None
+    )
+    ideal = Scanner(rig=scanner.rig, sequence=scanner.sequence, render=render)
+    differences: list[str] = []
+    for part in ("sensor", "projector"):
+        mine = getattr(scanner, part).to_dict()
+        base = getattr(ideal, part).to_dict()
+        differences += [
+            f"{part}.{key}: {mine.get(key)!r} (ideal: {base.get(key)!r})"
+            for key in sorted((set(mine) | set(base)) - _LABELS)
+            if mine.get(key) != base.get(key)
+        ]
+    mine, base = scanner.render.to_dict(), render.to_dict()
+    differences += [
+        f"render.{key}: {mine[key]!r} (ideal: {base[key]!r})"
+        for key in mine
+        if mine[key] != base[key]
+    ]
+    return IdealReference(ideal, tuple(differences))
 
 
 def run_demo(
@@ -102,6 +188,7 @@ def run_demo(
     scanner: Scanner | None = None,
     overwrite: bool = False,
     resume: bool = False,
+    reference: bool = True,
 ) -> DemoResult:
     """Calibrate, capture the sphere, reconstruct with the calibration, fit, report.
 
@@ -115,11 +202,14 @@ def run_demo(
         during calibration.
     overwrite : remove an earlier run's files in ``out_dir`` first.
     resume : continue the demo in ``out_dir`` (same settings).
+    reference : run the ideal reference in ``DIR/ideal/`` when the scanner differs physically
+        from the ideal one (:func:`ideal_reference`); ``metrics.json`` records whether it
+        ran and why either way.
 
     Returns
     -------
     :class:`DemoResult`; ``DIR/metrics.json``, ``DIR/calibration/calibration.json`` and
-    ``DIR/scan/`` written.
+    ``DIR/scan/`` written (and ``DIR/ideal/`` where the reference ran).
     """
     from virtus.pipeline.calibrate import check_pose_spec
 
@@ -129,10 +219,30 @@ def run_demo(
     check_baseline(scanner.rig)
     scanner.check()
     run_config = {"config": config.to_dict(), "scanner": scanner.to_dict()}
+    decision = ideal_reference(scanner)
     with claim_run(
         out_dir, COMMAND, run_config, layout=LAYOUT, overwrite=overwrite, resume=resume
     ) as run:
-        return _run(run, config, scanner, progress)
+        result = _run(run, config, scanner, progress)
+        metrics = dict(result.metrics)
+        ideal = None
+        if reference and decision.needed:
+            (progress or (lambda *args: None))("ideal reference")
+            start = time.perf_counter()
+            ideal = run_demo(
+                run.path / IDEAL_DIR, config, progress=progress, scanner=decision.scanner,
+                overwrite=not run.resumed, resume=run.resumed, reference=False,
+            ).metrics  # fmt: skip
+            metrics["timing"] = {
+                **metrics["timing"],
+                "ideal_reference_s": round(time.perf_counter() - start, 3),
+            }
+        record = decision.to_dict(ran=ideal is not None)
+        if decision.needed and not reference:
+            record["reason"] = f"not requested (reference=False); {decision.reason}"
+        metrics["ideal_reference"] = record
+        run.write_json(METRICS_FILE, metrics, allow_nan=True)
+        return replace(result, metrics=metrics, reference=ideal)
 
 
 def _run(run: RunDirectory, config: DemoConfig, scanner: Scanner, progress: Any) -> DemoResult:
@@ -247,8 +357,7 @@ def _run(run: RunDirectory, config: DemoConfig, scanner: Scanner, progress: Any)
             "radial_error_map": "scan/sphere_radial_error.npy",
         },
     }
-    run.write_json(METRICS_FILE, metrics, allow_nan=True)
-    return DemoResult(root, metrics, fit, calibration)
+    return DemoResult(root, metrics, fit, calibration)  # metrics.json: see run_demo
 
 
 def _provenance() -> dict[str, Any]:

@@ -76,6 +76,7 @@ __all__ = [
     "ScanSettings",
     "decode_capture",
     "reconstruct_capture",
+    "rig_source",
     "scan",
 ]
 
@@ -279,6 +280,28 @@ def reconstruct_capture(
         )
         recon.save(capture_dir, out_ply, _reconstruction_source(capture, use, edge_max_step))
     return recon
+
+
+def rig_source(capture_dir: str | Path, calibration: str | Path | Rig | None = None) -> str:
+    """Where the rig :func:`reconstruct_capture` triangulates ``capture_dir`` with comes
+    from, in words: the calibration file given (its path), or the rig in ``capture.json``:
+    the true rig of a rendered capture, or the calibration an imported capture was imported
+    with (its path, from ``calibration_source``)."""
+    if isinstance(calibration, Rig):
+        return "a Rig given by the caller"
+    if calibration is not None:
+        return str(calibration)
+    capture = Capture.load(capture_dir)
+    manifest = Path(capture_dir) / "capture.json"
+    source = capture.calibration_source
+    if source is not None:
+        imported = source.get("path")
+        if not capture.calibrated or not imported:
+            return f"{manifest} (a placeholder rig: no calibration was imported)"
+        return f"{imported} (imported with the capture; rig in {manifest})"
+    if capture.provenance.get("source") == "rendered":
+        return f"{manifest} (the true rig it was rendered with)"
+    return f"{manifest} (the rig it was saved with)"
 
 
 def _check_ply_target(capture_dir: Path, out_ply: str | Path | None) -> None:
