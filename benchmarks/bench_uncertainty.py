@@ -1,0 +1,151 @@
+"""The uncertainty model against Monte Carlo over the issue's whole matrix, and the speed of a
+12-variant prediction-only design sweep.
+
+1. **Model vs Monte Carlo**: a tilted plane and a sphere (24 mm, filling most of the field)
+   at 1 m, N = 3, 4, 18 steps, periods 18 and 36 px, the shot-noise-limited 12-bit sensor
+   (``ideal12``: the ``ideal`` preset is noise-free, so re-renders would not differ),
+   ``imx174`` and ``webcam``; the paper's rig with its camera cropped to ``--size`` px (the
+   paper's pixel footprint). For each case, the predicted sigma of ``u_p`` and of depth
+   against the standard deviation over ``--draws`` noisy re-renders
+   (:func:`virtus.design.montecarlo.monte_carlo`): the ratio measured / predicted at the
+   median pixel, at the 95th percentile (raw and pooled over the 90-99th percentile band),
+   and whether the issue's bounds (10 % median, 20 % 95th percentile) hold.
+2. **Design sweep**: ``virtus design`` with 12 variants (steps 3, 4, 9, 18 x period 12, 18,
+   36 px), prediction only, ``--grid`` camera samples a side, timed with ``--workers``.
+
+    PYTHONPATH=src python benchmarks/bench_uncertainty.py [--draws 30] [--size 48]
+        [--grid 64] [--workers 1] [--json out.json]
+
+Runs on the CPU (Mitsuba's LLVM variant) by default; with ``VIRTUS_MITSUBA_VARIANT=cuda_ad_rgb``
+the traces run on the GPU (the noise and decode stay on the host). Not a test: the times
+depend on the machine (quote them with its description).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import tempfile
+import time
+
+import numpy as np
+
+from virtus.design import monte_carlo, run_design
+from virtus.geometry.devices import Camera, Rig, default_rig
+from virtus.geometry.optics import Intrinsics
+from virtus.geometry.transforms import Pose
+from virtus.patterns import build_sequence
+from virtus.render.settings import RenderSettings
+from virtus.scanner import Scanner
+from virtus.scene.model import Material, PlaneObject, Scene, SphereObject
+from virtus.sensor import SENSOR_PRESETS, Sensor
+
+SENSORS = {
+    "ideal12": Sensor(name="ideal12", bit_depth=12, system_gain_dn_per_e=4095 / 20000),
+    "imx174": SENSOR_PRESETS["imx174"],
+    "webcam": SENSOR_PRESETS["webcam"],
+}
+
+
+def scenes() -> dict[str, Scene]:
+    matte = Material(albedo=0.8, specular=0.0)
+    tilted = Pose.from_euler("xyz", [20.0, -25.0, 0.0], t=(0, 0, 1.0))
+    return {
+        "plane": Scene(objects=[], background=PlaneObject((1.0, 1.0), tilted, matte)),
+        "sphere": Scene(
+            objects=[SphereObject(0.012, (0.0, 0.0, 1.0), matte)],
+            background=PlaneObject((2.0, 2.0), Pose(np.eye(3), (0.0, 0.0, 1.3)), matte),
+        ),
+    }
+
+
+def cropped_rig(size: int) -> Rig:
+    rig = default_rig()
+    k = rig.camera.intrinsics
+    camera = Intrinsics(k.fx, k.fy, (size - 1) / 2, (size - 1) / 2, size, size)
+    return Rig(Camera(camera), rig.projector, rig.proj2cam)
+
+
+def model_vs_monte_carlo(draws: int, size: int) -> list[dict]:
+    rows = []
+    rig = cropped_rig(size)
+    header = f"{'scene':<7}{'sensor':<9}{'N':>3}{'T':>4}  " + " ".join(
+        f"{q + ' ' + s:>15}" for q in ("u_p", "depth") for s in ("median", "p95", "p95 pooled")
+    )
+    print(header + f"{'ok':>5}{'orders':>8}")
+    for scene_name, scene in scenes().items():
+        for sensor_name, sensor in SENSORS.items():
+            for steps in (3, 4, 18):
+                for period in (18.0, 36.0):
+                    sequence = build_sequence(912, 1140, periods=period, steps=steps,
+                                              gray_bits=7, directions=("v",))  # fmt: skip
+                    scanner = Scanner(rig=rig, sequence=sequence, sensor=sensor,
+                                      render=RenderSettings(spp=4))  # fmt: skip
+                    result = monte_carlo(scanner, scene, draws)
+                    row = {"scene": scene_name, "sensor": sensor_name, "steps": steps,
+                           "period_px": period, "order_errors": result.order_errors}  # fmt: skip
+                    cells = []
+                    ok = True
+                    for quantity in ("u_p", "depth"):
+                        ratios = result.ratios(quantity)
+                        row[quantity] = ratios
+                        row[f"{quantity}_predicted_median"] = float(
+                            np.median(result.predicted[quantity])
+                        )
+                        ok &= abs(ratios["median"] - 1) <= 0.1
+                        ok &= abs(ratios["p95_pooled"] - 1) <= 0.2
+                        cells += [ratios["median"], ratios["p95_raw"], ratios["p95_pooled"]]
+                    row["within_bounds"] = bool(ok)
+                    rows.append(row)
+                    print(f"{scene_name:<7}{sensor_name:<9}{steps:>3}{period:>4.0f}  "
+                          + " ".join(f"{c:>15.3f}" for c in cells)
+                          + f"{'yes' if ok else 'NO':>5}{result.order_errors:>8.2%}",
+                          flush=True)  # fmt: skip
+    return rows
+
+
+def sweep_timing(grid: int, workers: int) -> dict:
+    vary = ["steps=3,4,9,18", "period_px=12,18,36"]
+    base = Scanner(sensor=SENSOR_PRESETS["imx174"])
+    with tempfile.TemporaryDirectory() as out:
+        start = time.perf_counter()
+        rows = run_design(out, base, vary=vary, grid=grid, workers=workers)
+        seconds = time.perf_counter() - start
+    print(f"\ndesign sweep: {len(rows)} variants, grid {grid}, workers {workers}: "
+          f"{seconds:.1f} s ({seconds / len(rows):.2f} s a variant)")  # fmt: skip
+    for row in rows:
+        print(f"  steps {row['steps']:>2} period {row['period_px']:>4.0f} px: depth sigma "
+              f"median {row['sigma_depth_um_median']:7.2f} um, p95 "
+              f"{row['sigma_depth_um_p95']:7.2f} um")  # fmt: skip
+    return {"variants": len(rows), "grid": grid, "workers": workers, "seconds": seconds,
+            "rows": rows}  # fmt: skip
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--draws", type=int, default=30, help="noisy re-renders per case")
+    parser.add_argument("--size", type=int, default=48, help="camera px a side (cropped)")
+    parser.add_argument("--grid", type=int, default=64, help="sweep camera samples a side")
+    parser.add_argument("--workers", type=int, default=1, help="sweep worker processes")
+    parser.add_argument("--skip-matrix", action="store_true", help="only the sweep timing")
+    parser.add_argument("--json", help="write the results to this JSON file")
+    args = parser.parse_args()
+    machine = f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs"
+    variant = os.environ.get("VIRTUS_MITSUBA_VARIANT", "auto")
+    print(f"{machine}; Mitsuba variant {variant}; {args.draws} draws, {args.size} px\n")
+    start = time.perf_counter()
+    matrix = [] if args.skip_matrix else model_vs_monte_carlo(args.draws, args.size)
+    if matrix:
+        held = sum(r["within_bounds"] for r in matrix)
+        print(f"\n{held}/{len(matrix)} cases within the bounds "
+              f"({time.perf_counter() - start:.1f} s)")  # fmt: skip
+    timing = sweep_timing(args.grid, args.workers)
+    if args.json:
+        with open(args.json, "w") as file:
+            json.dump({"machine": machine, "matrix": matrix, "sweep": timing}, file, indent=1)
+
+
+if __name__ == "__main__":
+    main()
