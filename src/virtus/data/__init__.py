@@ -15,6 +15,8 @@ One concept per module:
   (:func:`generate`), resumable after any interruption.
 * :mod:`virtus.data.loaders` -- :class:`FringeDataset` (PyTorch map-style; torch optional).
 * :mod:`virtus.data.export` -- WebDataset tar shards (:func:`export_webdataset`).
+* :mod:`virtus.data.mlbench` -- FPP-ML-Bench's layout (:func:`export_fpp_ml_bench`) and the
+  single-shot input frame of a sample (:func:`input_frame_index`).
 
 Example::
 
@@ -30,6 +32,7 @@ from virtus.data.export import export_webdataset
 from virtus.data.generate import GenerateReport, generate
 from virtus.data.integrity import DamagedSample
 from virtus.data.loaders import FringeDataset
+from virtus.data.mlbench import export_fpp_ml_bench, input_frame_index
 from virtus.data.store import DatasetStore, VerifyReport
 
 __all__ = [
@@ -39,7 +42,9 @@ __all__ = [
     "FringeDataset",
     "GenerateReport",
     "VerifyReport",
+    "export_fpp_ml_bench",
     "export_webdataset",
     "generate",
+    "input_frame_index",
     "load_config",
 ]

@@ -30,7 +30,8 @@ number; lists of choices are drawn uniformly per sample)::
       sequences: []                # sequence description files (virtus patterns), added
                                    # to the choices
     objects:
-      count: [1, 1]                # objects per sample (training, ablation)
+      count: [1, 1]                # objects per sample (training, ablation); training may
+                                   # use 0 (planes only: a flat-plane test set)
       distance_m: [0.9, 1.1]       # object centres: camera-frame depth range
       field: 0.5                   # centres fall in this central share of the image
       sources:                     # what objects are made of (at least one)
@@ -160,6 +161,17 @@ def _choices(name: str, value: Any, item: Any) -> tuple:
     if len(set(out)) != len(out):
         raise InputError(name, "distinct choices", value)
     return out
+
+
+def _object_count(mode: str, value: Any, planes: Any) -> tuple[int, int]:
+    """``objects.count``: 0 objects is a training sample of background planes only (a
+    flat-plane test set); other modes place at least one object, and a sample is never empty."""
+    low = 0 if mode == "training" else 1
+    count = _int_range("objects.count", value, low, MAX_OBJECTS)
+    no_planes = planes is not None and _int_range("planes.count", planes, 0, MAX_OBJECTS)[0] == 0
+    if count[0] == 0 and no_planes:
+        raise InputError("objects.count", "at least 1 where planes.count may be 0", list(count))
+    return count
 
 
 def _section(data: Mapping[str, Any], key: str, allowed: tuple[str, ...]) -> Mapping[str, Any]:
@@ -504,7 +516,7 @@ class DatasetConfig:
                 lambda n, v: _spec(n, v, PROJECTOR_PRESETS, base),
             ),  # fmt: skip
             fringes=_fringes(data, base),
-            object_count=_int_range("objects.count", objects.get("count", [1, 1]), 1, MAX_OBJECTS),
+            object_count=_object_count(mode, objects.get("count", [1, 1]), planes.get("count")),
             object_distance_m=_range(
                 "objects.distance_m", objects.get("distance_m", [0.9, 1.1]), 0.05, 100.0
             ),
