@@ -32,6 +32,8 @@ Frames: the world frame is the camera frame (``cam2world`` is the identity); pos
 
 from __future__ import annotations
 
+import fcntl
+
 import functools
 import math
 from dataclasses import dataclass, field
@@ -498,9 +500,17 @@ class Randomiser:
         from virtus.scene.procedural import freeform_object
 
         path = self.assets_dir / f"freeform_{shape_seed}_s{subdivisions}.stl"
-        if not path.is_file():
-            mesh = freeform_object(0.1, subdivisions, shape_seed)
-            atomic_write(path, lambda tmp: mesh.export(tmp, file_type="stl"))
+        if path.is_file():
+            return path
+        # Workers that draw the same shape at once would stage the same file name: one's
+        # rename takes the other's half-written file (seen with 12 GPU workers). One writer
+        # at a time per assets folder; the others find the file written.
+        self.assets_dir.mkdir(parents=True, exist_ok=True)
+        with open(self.assets_dir / ".freeform.lock", "a") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            if not path.is_file():
+                mesh = freeform_object(0.1, subdivisions, shape_seed)
+                atomic_write(path, lambda tmp: mesh.export(tmp, file_type="stl"))
         return path
 
     def _planes(self, rng: np.random.Generator, first: int) -> list[tuple[ObjectRecord, Any]]:
