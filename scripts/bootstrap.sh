@@ -25,6 +25,9 @@ if command -v apt-get >/dev/null; then
     missing=()
     python3 -c "import venv, ensurepip" >/dev/null 2>&1 || missing+=(python3-venv python3-pip)
     command -v python3 >/dev/null || missing+=(python3)
+    # tests/report/test_browser.py: a real headless browser and its WebDriver (Debian's).
+    command -v chromium >/dev/null || missing+=(chromium)
+    command -v chromedriver >/dev/null || missing+=(chromium-driver)
     if [ ${#missing[@]} -gt 0 ] || ! have_llvm; then
         export DEBIAN_FRONTEND=noninteractive
         as_root apt-get update -qq

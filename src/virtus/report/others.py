@@ -1,0 +1,142 @@
+"""Report sections of the runs that are tables of experiments or collections: an ablation
+(its heat map, one bar chart per metric, the table), a twin validation (per-pose
+differences between the real captures and their re-rendering) and a dataset store (a
+gallery of a few samples with their labels).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from virtus.report import figures
+from virtus.report.html import Page
+
+__all__ = ["GALLERY_SAMPLES", "add_ablation", "add_dataset", "add_twin"]
+
+#: Samples shown in a dataset store's gallery.
+GALLERY_SAMPLES = 4
+
+
+def _number(value: Any) -> float:
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) \
+        else math.nan  # fmt: skip
+
+
+def add_ablation(page: Page, path: Path) -> dict[str, Any]:
+    """The ablation's heat map (as the run drew it), bars per metric and the full table."""
+    from virtus.report.runs import read_run_json
+
+    data = read_run_json(path, "ablation.json", "ablation table", ("cells",))
+    rows = [r for r in data["cells"] if isinstance(r, dict)]
+    section = page.section("Ablation")
+    heat = path / "ablation.png"
+    if heat.is_file():
+        from virtus.io.images import image_size
+
+        image_size(heat)  # a PNG header, bounded, before it goes into the page
+        section.figure("heat-map", heat.read_bytes(),
+                       "The run's heat map (ablation.png): the metrics of every cell.")  # fmt: skip
+    names = [f"{r.get('material')}/{r.get('ambient')}/{r.get('realism')}" for r in rows]
+    units = data.get("units", {})
+    for metric in ("radius_error_mm", "fit_rms_mm", "proj_error_rms_px", "phase_error_rms_rad"):
+        values = [_number(r.get(metric)) for r in rows]
+        if all(math.isnan(v) for v in values):
+            continue
+        unit = units.get(metric, "")
+        section.figure(
+            f"bars-{metric}",
+            figures.bar_chart(names, {metric: values}, f"{metric} ({unit})", metric),
+            f"{metric} per cell (material / ambient / realism), {unit}.",
+        )
+    if rows:
+        header = list(rows[0])
+        section.grid("cells", header, [[r.get(k) for k in header] for r in rows])
+    return data
+
+
+def add_twin(page: Page, path: Path) -> dict[str, Any] | None:
+    """The twin's Isaac parameters and, with ``--validate``, the per-pose differences."""
+    from virtus.report.runs import read_run_json
+
+    section = page.section("Digital twin")
+    isaac = read_run_json(path, "isaac.json", "Isaac parameters")
+    section.table("Isaac Sim parameters (isaac.json)", isaac)
+    if not (path / "validation.json").is_file():
+        section.note("No validation: run `virtus twin CALIBRATION --validate CAPTURES`.")
+        return None
+    data = read_run_json(path, "validation.json", "twin validation", ("per_pose", "overall"))
+    poses = [p for p in data["per_pose"] if isinstance(p, dict)]
+    names = [str(p.get("name")) for p in poses]
+    section = page.section("Twin validation: real against virtual")
+    groups = {
+        "image differences (share of full scale)": ("white_rms", "black_rms", "fringe_rms",
+                                                    "code_rms"),
+        "projector coordinates (projector px)": ("proj_uv_rms_px", "centre_diff_mean_px",
+                                                 "centre_diff_max_px"),
+        "cloud (mm)": ("cloud_mae_mm", "cloud_rmse_mm", "point_noise_real_mm",
+                       "point_noise_twin_mm"),
+    }  # fmt: skip
+    for index, (label, keys) in enumerate(groups.items()):
+        series = {k: [_number(p.get(k)) for p in poses] for k in keys if any(k in p for p in poses)}
+        if not series:
+            continue
+        section.figure(
+            f"differences-{index}",
+            figures.bar_chart(names, series, label, f"twin - real per pose: {label}"),
+            f"Per board pose, the real capture against its re-rendering by the twin: {label}.",
+        )
+    section.table("overall", data["overall"])
+    if poses:
+        header = list(poses[0])
+        section.grid("per pose", header, [[p.get(k) for k in header] for p in poses])
+    section.note(
+        "Difference maps per pose are not stored by `virtus twin --validate` (only these "
+        "per-pose numbers), so the report shows the numbers."
+    )
+    return data
+
+
+def add_dataset(page: Page, path: Path) -> dict[str, Any]:
+    """The store's summary and a gallery: for the first :data:`GALLERY_SAMPLES` samples,
+    one fringe frame, the depth and the wrapped phase, with the sample's labels."""
+    from virtus.data import DatasetStore
+
+    store = DatasetStore.open(path)
+    info = store.info()
+    section = page.section("Dataset store")
+    section.table("store", {k: v for k, v in info.items() if k != "path"})
+    samples = store.samples()
+    gallery = page.section("Gallery")
+    arrays = {spec.name for spec in store.layout}
+    for index in sorted(samples)[:GALLERY_SAMPLES]:
+        meta = samples[index]
+        wanted = tuple(n for n in ("frames", "depth", "wrapped", "mask") if n in arrays)
+        sample = store.read_sample(index, wanted)
+        frames = np.asarray(sample["frames"])
+        n_frames = int(meta.get("n_frames", len(frames)))
+        frame = frames[0] if n_frames else np.zeros(frames.shape[1:])
+        gallery.figure(f"sample-{index}-frame", figures.image_map(
+            frame, "intensity", f"sample {index}: frame 0"),
+            f"Sample {index} ({meta.get('split')}), first of its {n_frames} frames.")  # fmt: skip
+        if "depth" in sample:
+            depth = np.asarray(sample["depth"], dtype=np.float64) * 1000.0
+            gallery.figure(f"sample-{index}-depth", figures.image_map(
+                depth, "depth", f"sample {index}: depth"),
+                f"Sample {index}: ground-truth depth (mm), grey: no surface.")  # fmt: skip
+        if "wrapped" in sample:
+            wrapped = np.asarray(sample["wrapped"], dtype=np.float64)
+            wrapped = wrapped[0] if wrapped.ndim == 3 else wrapped
+            gallery.figure(f"sample-{index}-wrapped", figures.image_map(
+                wrapped, "wrapped_phase", f"sample {index}: wrapped phase",
+                limits=(-np.pi, np.pi)), f"Sample {index}: wrapped phase label (rad).")  # fmt: skip
+        labels = {
+            k: v
+            for k, v in meta.items()
+            if k in ("index", "split", "group", "seed", "n_frames", "objects", "checksum")
+        }
+        gallery.table(f"sample {index} labels", labels)
+    return info
