@@ -519,7 +519,7 @@ IK_ROTATION_RAD = 1e-6
 HANDEYE_EXACT_RAD = 1e-6
 HANDEYE_EXACT_M = 1e-6
 #: hand-eye expected errors against the errors seen over seeded noisy trials: the 1-sigma
-#: RSS prediction and the RMS of 30 draws agree within sampling error (~13 % for 30 draws
+#: RSS prediction and the RMS of 20 draws agree within sampling error (~16 % for 20 draws
 #: of a 3-d error); a factor 2 either way still fails a covariance off by sqrt(K) (points
 #: of one pose share their pose's error), which was 4.5x here.
 HANDEYE_EXPECTED_RATIO = 2.0
