@@ -177,21 +177,22 @@ def elerac_images() -> np.ndarray:
 
 
 def lab_bmps() -> np.ndarray:
-    """The LightCrafter lab's 912 x 1140 BMPs, as its generator draws them on DMD rows
-    counted in pairs (row pair p = r // 2 of DMD row r): white; horizontal square waves,
-    frame n = 0..17 lighting pair p where (p + n) mod 18 < 9; Gray code of floor(r / 36),
-    least significant bit first, 5 bits; vertical square waves lighting column x where
-    (x + n) mod 18 < 9; Gray code of floor(x / 18), 6 bits, least significant first; four
-    black frames."""
+    """The LightCrafter lab's 912 x 1140 BMPs (kimthyung/3D_Reconstruction_with_Fringe_pattern,
+    ``for_calibration/``), in the order its capture shows them: horizontal square waves,
+    frame n = 0..17 lighting DMD row r where (r + 8 + 2n) mod 36 < 18 (row pair p = r // 2
+    where (p + n + 4) mod 18 < 9); Gray code of floor(r / 36), least significant bit first,
+    5 bits; two black frames; vertical square waves lighting column x where
+    (x + n + 4) mod 18 < 9; Gray code of floor(x / 18), 6 bits, least significant first; two
+    black frames; white. (The lab's own files zero-fill the first few rows and columns of
+    frames 0..4 where these wrap around: not describable, left out here.)"""
     r, x = np.arange(1140), np.arange(912)
-    p = r // 2
-    profiles = [np.array(255)]
-    profiles += [255 * (((p + n) % 18) < 9) for n in range(18)]
+    profiles = [255 * (((r + 8 + 2 * n) % 36) < 18) for n in range(18)]
     profiles += [255 * ((_gray(r // 36) >> b) & 1) for b in range(5)]
-    profiles += [255 * (((x + n) % 18) < 9) for n in range(18)]
+    profiles += [np.array(0)] * 2
+    profiles += [255 * (((x + n + 4) % 18) < 9) for n in range(18)]
     profiles += [255 * ((_gray(x // 18) >> b) & 1) for b in range(6)]
-    profiles += [np.array(0)] * 4
-    directions = [None] + ["h"] * 23 + ["v"] * 24 + [None] * 4
+    profiles += [np.array(0)] * 2 + [np.array(255)]
+    directions = ["h"] * 23 + [None] * 2 + ["v"] * 24 + [None] * 3
     return _stack(profiles, 912, 1140, directions)
 
 
@@ -255,8 +256,8 @@ def test_elerac_shipped_frames_are_their_documented_generator() -> None:
 def test_lightcrafter_example_is_a_912_by_570_projector_on_dmd_rows() -> None:
     lab, _ = load_sequence_file(EXAMPLES / "lightcrafter_lab.yaml")
     assert (lab.width, lab.height, len(lab), lab.scale) == (912, 570, 52, (1.0, 2.0))
-    assert [f.kind for f in lab.frames[:2]] == ["white", "phase"]
-    assert lab.frames[1].direction == "h" and lab.frames[24].direction == "v"
+    assert [f.kind for f in lab.frames[:1]] + [lab.frames[-1].kind] == ["phase", "white"]
+    assert lab.frames[0].direction == "h" and lab.frames[25].direction == "v"
     assert lab.periods("h") == (36.0,) and lab.periods("v") == (18.0,)
     assert sum(f.kind == "black" for f in lab.frames) == 4 and "ignore" not in {
         f.kind for f in lab.frames

@@ -173,12 +173,16 @@ def test_twin_fit_command_writes_models_the_scanner_reads(tmp_path, capsys):
     projector = load_projector(tmp_path / "t" / "projector.yaml")
     report = json.loads((tmp_path / "t" / "photometric.json").read_text())
     rel = tol.PHOTOMETRIC_FIT_REL
-    assert sensor.name == "fitted" and sensor.vignetting == "cos4" and sensor.bit_depth == 10
+    assert sensor.name == "fitted" and sensor.vignetting == "cos" and sensor.bit_depth == 10
+    exponent = TRUE_SENSOR.vignetting_exponent
+    assert sensor.vignetting_exponent == pytest.approx(exponent, rel=rel)
     assert sensor.system_gain_dn_per_e == pytest.approx(TRUE_SENSOR.system_gain_dn_per_e, rel=rel)
     assert sensor.exposure == pytest.approx(TRUE_SENSOR.exposure, rel=rel)
     assert projector.gamma == pytest.approx(TRUE_PROJECTOR.gamma, rel=rel)
     assert projector.psf_sigma_px == pytest.approx(TRUE_PROJECTOR.psf_sigma_px, rel=rel)
-    assert projector.falloff == "cos4" and projector.contrast_ratio == 500.0
+    assert projector.falloff == "cos" and projector.contrast_ratio == 500.0
+    exponent = TRUE_PROJECTOR.falloff_exponent
+    assert projector.falloff_exponent == pytest.approx(exponent, rel=rel)
     assert report["ambient"] == pytest.approx(AMBIENT, rel=rel)
     assert len(report["captures"]) == 3 and report["shading"]["separable"]
     # captures after both options are ambiguous: one line

@@ -231,6 +231,31 @@ def test_vignetting_scales_each_pixel_by_cos4() -> None:
         Sensor(vignetting="cos3")
 
 
+def test_vignetting_cos_k_takes_its_exponent() -> None:
+    """``vignetting: cos`` with ``vignetting_exponent: k`` scales by cos(theta)**k (a real
+    lens's k, fitted by ``twin --fit``); k = 4 is ``cos4``; files without the key (and every
+    sensor without "cos") are read and written as before."""
+    rig = small_rig()
+    intrinsics = rig.camera.intrinsics
+    rays = intrinsics.unproject(intrinsics.pixel_grid().reshape(-1, 2))
+    for k in (2.7, 4.0, 6.3):
+        sensor = Sensor(vignetting="cos", vignetting_exponent=k)
+        np.testing.assert_allclose(sensor.vignetting_gain(intrinsics), rays[:, 2] ** k, rtol=1e-6)
+        assert sensor.vignetting_power == k
+        assert Sensor.from_dict(sensor.to_dict()) == sensor
+    four = Sensor(vignetting="cos", vignetting_exponent=4.0).vignetting_gain(intrinsics)
+    np.testing.assert_allclose(four, Sensor(vignetting="cos4").vignetting_gain(intrinsics),
+                               rtol=1e-6)  # fmt: skip
+    assert (Sensor().vignetting_power, Sensor(vignetting="cos4").vignetting_power) == (0.0, 4.0)
+    assert "vignetting_exponent" not in Sensor(vignetting="cos4").to_dict()
+    for bad in ({"vignetting": "cos"}, {"vignetting": "cos", "vignetting_exponent": 0.0},
+                {"vignetting": "cos", "vignetting_exponent": 40.0},
+                {"vignetting": "cos", "vignetting_exponent": "4"},
+                {"vignetting": "cos4", "vignetting_exponent": 3.0}):  # fmt: skip
+        with pytest.raises(InputError, match="^vignetting_exponent"):
+            Sensor(**bad)
+
+
 def test_saturated_pixels_are_in_the_ground_truth(tmp_path) -> None:
     from virtus.capture.capture import Capture
     from virtus.render import render

@@ -212,6 +212,35 @@ def test_cos4_falloff() -> None:
     np.testing.assert_allclose(white, 1 / (1 + x**2) ** 2, rtol=1e-6)
 
 
+def test_cos_k_falloff() -> None:
+    """``falloff: cos`` with ``falloff_exponent: k``: cos(theta_p)**k; k = 4 is ``cos4``."""
+    from virtus.geometry.devices import default_rig
+
+    intrinsics = default_rig().projector.intrinsics
+    sequence = build_sequence(WIDTH, HEIGHT, periods=1000.0, steps=3, directions=("v",))
+    u = np.array([intrinsics.cx, 0.0, WIDTH - 1.0])
+    x = (u - intrinsics.cx) / intrinsics.fx
+    for k in (3.1, 5.5):
+        projector = ProjectorModel(falloff="cos", falloff_exponent=k)
+        frames = synthesize(line_trace(u, v_p=intrinsics.cy), sequence, projector,
+                            projector_intrinsics=intrinsics)  # fmt: skip
+        white = frames[sequence.index_of("white"), 0]
+        np.testing.assert_allclose(white, (1 + x**2) ** (-k / 2), rtol=1e-6)
+        assert ProjectorModel.from_dict(projector.to_dict()) == projector
+        assert projector.falloff_power == k
+    four = ProjectorModel(falloff="cos", falloff_exponent=4.0)
+    np.testing.assert_allclose(
+        four.falloff_factor(u, np.full(3, intrinsics.cy), intrinsics),
+        ProjectorModel(falloff="cos4").falloff_factor(u, np.full(3, intrinsics.cy), intrinsics),
+        rtol=1e-6,
+    )
+    assert "falloff_exponent" not in ProjectorModel(falloff="cos4").to_dict()
+    for bad in ({"falloff": "cos"}, {"falloff": "cos", "falloff_exponent": -1.0},
+                {"falloff": "none", "falloff_exponent": 2.0}):  # fmt: skip
+        with pytest.raises(InputError, match="^falloff_exponent"):
+            ProjectorModel(**bad)
+
+
 def test_ideal_models_are_the_old_renderer() -> None:
     sequence = build_sequence(WIDTH, HEIGHT, periods=18.0, steps=18, gray_bits=6)
     u = np.random.default_rng(1).uniform(-0.5, WIDTH - 0.5, 5000)

@@ -11,8 +11,14 @@ RectLight size and both poses in Isaac's world) and, with usd-core, ``DIR/twin.u
 pose is rendered again with the twin -- a :class:`~virtus.scanner.Scanner` built from the
 twin rig and the captures' sequence, resolution and bit depth, the board placed by the
 calibration's own extrinsics (``per_pose[*].board2cam`` of ``calibration.json``, matched by
-pose name; a pose the file lacks is placed by ``cv2.solvePnP`` of its detected points with
-the twin camera) -- and both captures are decoded (with fringe-order repair) and compared:
+pose name; a pose the file lacks -- a lab's calibration in text files, say -- is placed from
+**both devices**, :func:`stereo_board_pose`: its circle centres in the camera and their
+decoded projector points triangulated, and the board fitted to them; camera-only PnP leaves
+the board's depth to the camera's focal length, and a 1 % focal error moves the board ~1 %
+of its distance off the surface the rig reconstructs) -- and both captures are decoded
+(with fringe-order repair) and compared (``posed_by``: ``calibration`` or ``stereo``, with
+the stereo pose's errors ``pose_errors``: 3-D fit RMS in mm, reprojection RMS per device
+in px):
 
 * ``centre_diff_px``: board point (circle centre / corner) positions, real minus virtual,
   mean and max of the distances, px;
@@ -82,6 +88,7 @@ __all__ = [
     "compare_captures",
     "load_photometry",
     "check_validation",
+    "stereo_board_pose",
     "validate_twin",
     "write_photometry",
     "write_twin",
@@ -260,6 +267,49 @@ def _pnp(rig: Rig, board: Board, points: np.ndarray) -> Pose:
     if not ok:
         raise VirtusError("twin validation: could not place the board (solvePnP failed)")
     return Pose.from_rotvec(rvec.ravel(), tvec.ravel())
+
+
+def stereo_board_pose(
+    rig: Rig, board: Board, cam_points: np.ndarray, homographies: np.ndarray
+) -> tuple[Pose, dict[str, float]]:
+    """The board pose seen by both devices: each board point triangulated from its camera
+    position (``cam_points``, (N, 2) px, circle centres corrected for the centroid bias of
+    their images as calibration does) and its projector position (``homographies``, (N, 3,
+    3) local camera -> projector maps evaluated there), and the board's points fitted to
+    them by the rigid motion of least squares (Kabsch / Horn's closed form). The board then
+    lies on the surface the rig reconstructs, whatever error its calibration has (camera-only
+    PnP places it by the camera's focal length alone). Returns ``board2cam`` and the fit's
+    errors: ``fit_mm`` (RMS 3-D residual), ``camera`` and ``projector`` (RMS reprojection
+    error, px)."""
+    from virtus.calib.board import CircleBoard
+    from virtus.calib.projector import apply_homographies
+    from virtus.calib.solve import centroid_bias
+    from virtus.reconstruct import triangulate
+
+    obj = board.object_points
+    cam = np.asarray(cam_points, dtype=np.float64)
+    if isinstance(board, CircleBoard):
+        cam = cam - centroid_bias(rig.camera.intrinsics, board, _pnp(rig, board, cam))
+    proj = apply_homographies(homographies, cam)
+    points = triangulate(rig, cam, proj)
+    seen = np.isfinite(points).all(axis=1)
+    if seen.sum() < 3:
+        raise VirtusError("twin validation: fewer than 3 board points seen by both devices")
+    a, b = obj[seen], points[seen]
+    centre_a, centre_b = a.mean(axis=0), b.mean(axis=0)
+    u, _, vt = np.linalg.svd((a - centre_a).T @ (b - centre_b))
+    flip = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
+    rotation = vt.T @ flip @ u.T
+    pose = Pose(rotation, centre_b - rotation @ centre_a)
+    in_cam = pose.apply(obj)
+    r_cam = rig.camera.intrinsics.project(in_cam) - cam
+    r_proj = rig.projector.intrinsics.project(rig.cam2proj.apply(in_cam[seen])) - proj[seen]
+    errors = {
+        "fit_mm": float(1e3 * np.sqrt(np.mean(np.sum((pose.apply(a) - b) ** 2, axis=1)))),
+        "camera": float(np.sqrt(np.mean(np.sum(r_cam**2, axis=1)))),
+        "projector": float(np.sqrt(np.mean(np.sum(r_proj**2, axis=1)))),
+    }
+    return pose, errors
 
 
 def _on_board(rig: Rig, board: Board, board2cam: Pose) -> np.ndarray:
@@ -442,12 +492,15 @@ def validate_twin(
                 f"capture {name!r}", f"{cam.width}x{cam.height} px frames", real.frames.shape
             )
         board2cam = poses.get(name)
+        posed: dict[str, Any] = {"posed_by": "calibration"}
         if board2cam is None:
             obs = observe_pose(real, the_board, name)
             if obs.problem() is not None:
                 dropped[name] = obs.problem()  # type: ignore[assignment]
                 continue
-            board2cam = _pnp(rig, the_board, obs.cam_centroids)  # type: ignore[arg-type]
+            points, maps = obs.cam_centroids, obs.homographies
+            board2cam, errors = stereo_board_pose(rig, the_board, points, maps)  # type: ignore[arg-type]
+            posed = {"posed_by": "stereo", "pose_errors": errors}
         sensor = real.sensor or Sensor().with_(bit_depth=real.bit_depth)
         if light is not None and light.sensor.bit_depth != real.bit_depth:
             raise InputError(
@@ -465,7 +518,8 @@ def validate_twin(
         if light is not None and light.ambient > 0:
             scene = Scene(objects=scene.objects, ambient=light.ambient)
         virtual = scanner.capture(scene)
-        per_pose.append(compare_captures(rig, the_board, board2cam, real, virtual, name))
+        row = compare_captures(rig, the_board, board2cam, real, virtual, name)
+        per_pose.append({**row, **posed})
     if not per_pose:
         raise VirtusError("twin validation: no pose could be compared" + f" ({dropped})")
     result = TwinValidation(per_pose, _overall(per_pose), dropped)

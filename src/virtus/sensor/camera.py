@@ -33,8 +33,12 @@ from virtus.sensor.noise import LEGACY_NOISE_STREAMS, NOISE_STREAM, as_seed, sta
 
 #: Camera ADC bit depths.
 BIT_DEPTHS = (8, 10, 12, 16)
-#: Camera vignetting models.
-VIGNETTING = ("none", "cos4")
+#: Camera vignetting models: none, ``cos(theta)**4`` (the natural fall-off of an ideal thin
+#: lens), or ``cos(theta)**k`` with the exponent ``vignetting_exponent`` (a real lens: pupil
+#: aberration and mechanical vignetting make k differ from 4; fitted by ``twin --fit``).
+VIGNETTING = ("none", "cos4", "cos")
+#: Largest exponent k of a ``cos`` vignetting or fall-off (cos(30 deg)**32 = 1e-2).
+MAX_COS_EXPONENT = 32.0
 #: Why an auto exposure is impossible.
 NO_LIGHT = "auto exposure: no pixel receives light (is the projector aimed at the scene?)"
 #: Stream "frame" indices of the fixed-pattern noise maps (beyond any real frame index):
@@ -94,8 +98,10 @@ class Sensor:
     prnu : photo-response non-uniformity, standard deviation of the relative gain (0.01 = 1 %).
     black_level_dn : offset added before the ADC, DN (keeps dark noise above 0).
     fixed_pattern_seed : seed of the PRNU and DSNU maps.
-    vignetting : ``"none"`` or ``"cos4"``: the camera lens's natural fall-off
-        ``cos(theta)**4`` of the angle between a pixel's ray and the optical axis.
+    vignetting : ``"none"``, ``"cos4"`` or ``"cos"``: the camera lens's fall-off
+        ``cos(theta)**4`` (or ``cos(theta)**k``, ``k = vignetting_exponent``) of the angle
+        between a pixel's ray and the optical axis.
+    vignetting_exponent : ``k`` of ``"cos"`` vignetting, in (0, 32]; None otherwise.
     name : preset name, for reports.
     """
 
@@ -114,6 +120,7 @@ class Sensor:
     black_level_dn: float = 0.0
     fixed_pattern_seed: int = 0
     vignetting: str = "none"
+    vignetting_exponent: float | None = None
     name: str = "custom"
 
     def __post_init__(self) -> None:
@@ -165,6 +172,11 @@ class Sensor:
             raise InputError("fixed_pattern_seed", error.expected, error.got) from None
         if self.vignetting not in VIGNETTING:
             raise InputError("vignetting", f"one of {VIGNETTING}", self.vignetting)
+        object.__setattr__(
+            self,
+            "vignetting_exponent",
+            cos_exponent("vignetting", self.vignetting, self.vignetting_exponent),
+        )
         if not isinstance(self.name, str) or not self.name:
             raise InputError("name", "a non-empty string", self.name)
         noisy = any((self.dark_noise_e, self.dark_current_e_per_s * self.exposure_time_s,
@@ -198,14 +210,22 @@ class Sensor:
         well = self.system_gain_dn_per_e * self.saturation_capacity_e + self.black_level_dn  # type: ignore[operator]
         return int(min(self.full_scale, np.floor(well)))
 
+    @property
+    def vignetting_power(self) -> float:
+        """The exponent ``k`` of the vignetting ``cos(theta)**k`` (0 without, 4 for ``cos4``)."""
+        return cos_power(self.vignetting, self.vignetting_exponent)
+
     def vignetting_gain(self, intrinsics: Any) -> np.ndarray:
         """(P,) float32 relative irradiance of each camera pixel (row-major): 1 without
-        vignetting, ``cos(theta)**4`` of the pixel-centre ray with ``"cos4"``."""
+        vignetting, ``cos(theta)**k`` of the pixel-centre ray otherwise (k = 4 for
+        ``"cos4"``)."""
         n = intrinsics.width * intrinsics.height
         if self.vignetting == "none":
             return np.ones(n, dtype=np.float32)
         rays = intrinsics.unproject(intrinsics.pixel_grid().reshape(-1, 2))
-        return (rays[:, 2] ** 4).astype(np.float32)
+        if self.vignetting == "cos4":
+            return (rays[:, 2] ** 4).astype(np.float32)
+        return (rays[:, 2] ** self.vignetting_power).astype(np.float32)
 
     @property
     def noisy(self) -> bool:
@@ -215,6 +235,8 @@ class Sensor:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready parameters (the capture's ``sensor`` entry)."""
         data: dict[str, Any] = asdict(self)
+        if data["vignetting_exponent"] is None:  # only "cos" has one; older files lack it
+            del data["vignetting_exponent"]
         data["noise_stream"] = NOISE_STREAM
         return data
 
@@ -368,6 +390,26 @@ def _real(name: str, value: object, expected: str) -> float:
     if not np.isfinite(number):
         raise InputError(name, f"{expected} (finite)", value)
     return number
+
+
+def cos_exponent(name: str, model: str, exponent: object) -> float | None:
+    """Check the exponent of a ``cos`` fall-off model (camera vignetting or projector
+    fall-off, ``name``): a number in (0, :data:`MAX_COS_EXPONENT`] with ``"cos"``, None
+    (not given) with the other models."""
+    key = f"{name}_exponent"
+    if model != "cos":
+        if exponent is not None:
+            raise InputError(key, f'null unless {name} is "cos" (it is "{model}")', exponent)
+        return None
+    value = _real(key, exponent, f'a number in (0, {MAX_COS_EXPONENT:g}] for {name} "cos"')
+    if not 0.0 < value <= MAX_COS_EXPONENT:
+        raise InputError(key, f"a number in (0, {MAX_COS_EXPONENT:g}]", exponent)
+    return value
+
+
+def cos_power(model: str, exponent: float | None) -> float:
+    """The exponent ``k`` of a fall-off model: 0 for ``none``, 4 for ``cos4``, else its own."""
+    return {"none": 0.0, "cos4": 4.0}.get(model, exponent)  # type: ignore[return-value]
 
 
 def _non_negative(name: str, value: object) -> float:

@@ -16,7 +16,9 @@ pixel, :mod:`virtus.patterns`). A :class:`ProjectorModel` says what light comes 
    ``psf`` with fill factor 1 and sigma 0 is ``nearest``. The emitted profile is tabulated at
    :data:`PSF_SUPERSAMPLING` points per projector pixel and read by linear interpolation.
 4. **Fall-off**: ``cos4`` multiplies the light toward direction ``theta_p`` from the
-   projector axis by ``cos(theta_p)**4`` (natural vignetting of the projection lens).
+   projector axis by ``cos(theta_p)**4`` (natural vignetting of the projection lens),
+   ``cos`` by ``cos(theta_p)**k`` with ``k = falloff_exponent`` (a real lens and light
+   engine, fitted by ``twin --fit``).
 
 Ideal values (gamma 1, infinite contrast, ``nearest``, no fall-off) reproduce the ideal
 projector exactly.
@@ -34,14 +36,15 @@ import numpy as np
 from virtus.checks import as_member
 from virtus.errors import InputError
 from virtus.io.safeio import check_keys
+from virtus.sensor.camera import cos_exponent, cos_power
 
 #: Pattern input levels of an 8-bit projector.
 LEVELS = 255
 #: Samples per projector pixel of the tabulated emitted profile (``psf`` pixel model): the
 #: linear read-out of a profile blurred by >= 0.25 px is then accurate to ~1e-3 of its range.
 PSF_SUPERSAMPLING = 8
-#: Fall-off models.
-FALLOFFS = ("none", "cos4")
+#: Fall-off models (``cos``: ``cos(theta_p)**falloff_exponent``).
+FALLOFFS = ("none", "cos4", "cos")
 
 
 class Lookup(StrEnum):
@@ -124,7 +127,8 @@ class ProjectorModel:
     contrast_ratio : full-on / full-off light (e.g. 1000 for 1000:1); None = infinite.
     fill_factor : lit fraction of the pixel pitch along the pattern axis (``psf``), (0, 1].
     psf_sigma_px : Gaussian lens blur, projector px (``psf``), >= 0.
-    falloff : ``"none"`` or ``"cos4"``.
+    falloff : ``"none"``, ``"cos4"`` or ``"cos"`` (``cos(theta_p)**falloff_exponent``).
+    falloff_exponent : ``k`` of a ``"cos"`` fall-off, in (0, 32]; None otherwise.
     name : preset name, for reports.
     """
 
@@ -136,6 +140,7 @@ class ProjectorModel:
     fill_factor: float = 1.0
     psf_sigma_px: float = 0.0
     falloff: str = "none"
+    falloff_exponent: float | None = None
     name: str = "custom"
 
     def __post_init__(self) -> None:
@@ -156,6 +161,8 @@ class ProjectorModel:
             raise InputError("pixel", '"psf" for a fill factor or a PSF width', self.pixel.value)
         if self.falloff not in FALLOFFS:
             raise InputError("falloff", f"one of {FALLOFFS}", self.falloff)
+        exponent = cos_exponent("falloff", self.falloff, self.falloff_exponent)
+        object.__setattr__(self, "falloff_exponent", exponent)
         if not isinstance(self.name, str) or not self.name:
             raise InputError("name", "a non-empty string", self.name)
 
@@ -173,6 +180,8 @@ class ProjectorModel:
         data = asdict(self)
         data["pixel"] = self.pixel.value
         data["response_lut"] = None if self.response_lut is None else list(self.response_lut)
+        if data["falloff_exponent"] is None:  # only "cos" has one; older files lack it
+            del data["falloff_exponent"]
         return data
 
     @classmethod
@@ -252,18 +261,24 @@ class ProjectorModel:
         # Python floats keep float32 arrays float32 and work on device arrays too.
         return coordinate * float(r) + (r - 1) / 2
 
+    @property
+    def falloff_power(self) -> float:
+        """The exponent ``k`` of the fall-off ``cos(theta_p)**k`` (0 without, 4 for ``cos4``)."""
+        return cos_power(self.falloff, self.falloff_exponent)
+
     def falloff_factor(
         self, u_p: np.ndarray, v_p: np.ndarray, intrinsics: Any
     ) -> np.ndarray | None:
-        """``cos(theta_p)**4`` at projector pixels (float32, same shape), or None without
-        fall-off; ``intrinsics``: the projector's (its fx, fy, cx, cy)."""
+        """``cos(theta_p)**k`` at projector pixels (float32, same shape; k = 4 for ``cos4``),
+        or None without fall-off; ``intrinsics``: the projector's (its fx, fy, cx, cy)."""
         if self.falloff == "none":
             return None
         # Python floats: float32 arrays stay float32, and device (Dr.Jit) arrays work too.
         x = (u_p - float(intrinsics.cx)) / float(intrinsics.fx)
         y = (v_p - float(intrinsics.cy)) / float(intrinsics.fy)
         cos2 = 1.0 / (1.0 + x * x + y * y)
-        factor = cos2 * cos2
+        # Plain arithmetic (``**`` with a Python float) so Dr.Jit arrays take the same path.
+        factor = cos2 * cos2 if self.falloff == "cos4" else cos2 ** (0.5 * self.falloff_power)
         return factor.astype(np.float32) if isinstance(factor, np.ndarray) else factor
 
 

@@ -14,17 +14,22 @@ saturated, lit above :data:`MIN_SIGNAL_FRACTION` of the white-black range):
   ``sigma`` projector px, :meth:`~virtus.sensor.projector.ProjectorModel.spread`) are fitted
   to them: ``q_k`` mostly sets gamma (DESIGN.md section 9: the harmonics of ``g`` of a
   sinusoid), ``m1`` across the periods the blur, ``exp(-2 pi^2 sigma^2 / P^2)`` per harmonic
-  (a single period gives one ``m1``, still enough with gamma from ``q``);
+  (a single period gives one ``m1``, still enough with gamma from ``q``). Patterns of two
+  levels (square-wave fringes) send only 0 and 255, whose light no gamma changes: then the
+  prior's gamma is kept (``gamma_observable: false``) and the blur alone is fitted;
 * **camera vignetting and projector fall-off** -- ``log(white - black)`` less the
   geometry's ``log(cos(theta_i) |X_p| / z_p^3)`` (the renderer's radiance of a Lambertian
   point under a white projector, :mod:`virtus.render.tracing`, normals from the point map)
   is fitted by ``log C_j + n_c log cos(theta_c) + n_p log cos(theta_p)`` (robust least
   squares, one ``C_j`` per capture): ``cos(theta_c)`` of the camera ray about the camera's
   principal point, ``cos(theta_p)`` of the triangulated point's projector pixel about the
-  projector's. Exponent 4 is the models' ``cos4``. If the two regressors cannot be told
-  apart (correlation above :data:`SEPARABLE_MAX_CORRELATION` or a standard error above
-  :data:`SEPARABLE_MAX_STDERR`) one exponent of their product is fitted and the report says
-  ``separable: false``;
+  projector's. The exponents are stored as the models' ``cos`` vignetting and fall-off
+  (``cos(theta)**k``, :data:`EXPONENT_DECIMALS` decimals; ``none`` for ``k <= 0``, capped
+  at :data:`~virtus.sensor.camera.MAX_COS_EXPONENT`). If the two regressors cannot be told
+  apart (correlation above :data:`SEPARABLE_MAX_CORRELATION`, a standard error above
+  :data:`SEPARABLE_MAX_STDERR`, or a negative exponent: on a single flat pose the two trade
+  off, e.g. +9 against -15 on a real board) one exponent of their product is fitted and the
+  report says ``separable: false``;
 * **exposure** -- ``C_j = exposure * albedo * (1 - black)`` with the target's stated albedo;
 * **ambient light** -- the black frame over the projector's black level:
   ``A = S' ((black - offset) / (white - black) (1 - b) - b)`` with ``S'`` the white
@@ -42,10 +47,9 @@ saturated, lit above :data:`MIN_SIGNAL_FRACTION` of the white-black range):
 
 The result (:class:`PhotometricFit`) holds a :class:`~virtus.sensor.camera.Sensor` and a
 :class:`~virtus.sensor.projector.ProjectorModel` (written as the twin's ``sensor.yaml`` and
-``projector.yaml``), the ambient level and a report of every fitted number. The sensor and
-projector models know vignetting and fall-off only as ``none`` or ``cos4``: a fitted
-exponent is stored as the nearer of the two, and the report gives the exponent and the
-relative error that rounding leaves at the image corner.
+``projector.yaml``), the ambient level and a report of every fitted number (with the
+relative error at the image corner that storing each exponent leaves: none but for a capped
+or negative exponent).
 """
 
 from __future__ import annotations
@@ -60,7 +64,7 @@ from virtus.errors import DegenerateData, InputError
 from virtus.geometry.devices import Rig
 from virtus.patterns.decode import PhaseSet
 from virtus.reconstruct import points_from_decoded
-from virtus.sensor.camera import Sensor
+from virtus.sensor.camera import MAX_COS_EXPONENT, Sensor
 from virtus.sensor.projector import Lookup, ProjectorModel
 
 __all__ = [
@@ -91,8 +95,8 @@ NOISE_MAX_PIXELS = 50_000
 _NOISE_CHUNK = 4096
 #: Highest harmonic used for gamma.
 MAX_HARMONIC = 3
-#: Exponent of the models' ``cos4`` (vignetting and fall-off).
-COS4 = 4.0
+#: Decimals of a stored vignetting or fall-off exponent (files stay short and stable).
+EXPONENT_DECIMALS = 3
 
 
 @dataclass(frozen=True)
@@ -182,8 +186,11 @@ def _normals(points: np.ndarray) -> np.ndarray:
         return normal / np.linalg.norm(normal, axis=2, keepdims=True)
 
 
-def _view(capture: Capture, rig: Rig, sensor: Sensor | None) -> _View:
-    """The valid pixels of one capture with their white, black and geometry."""
+def _view(
+    capture: Capture, rig: Rig, sensor: Sensor | None, region: np.ndarray | None = None
+) -> _View:
+    """The valid pixels of one capture (inside ``region`` if given) with their white, black
+    and geometry."""
     frames = capture.frames
     white = frames[_uniform_index(capture, "white")].astype(np.float64)
     black = frames[_uniform_index(capture, "black")].astype(np.float64)
@@ -197,8 +204,16 @@ def _view(capture: Capture, rig: Rig, sensor: Sensor | None) -> _View:
     lit = signal[decoded.mask]
     if lit.size == 0:
         raise DegenerateData("photometric fit: no decoded pixel in a capture")
+    if region is not None:
+        region = np.asarray(region)
+        if region.dtype != bool or region.shape != signal.shape:
+            raise InputError(
+                f"region of {capture.path or 'capture'}",
+                f"a boolean mask of shape {signal.shape}",
+                f"{region.dtype} {region.shape}",
+            )
     valid = (
-        decoded.mask
+        (decoded.mask if region is None else decoded.mask & region)
         & ~decoded.flagged
         & (brightest < _saturation(capture, sensor))
         & (signal > MIN_SIGNAL_FRACTION * np.percentile(lit, 99))
@@ -328,8 +343,19 @@ def _fit_response(views: list[_View], prior: ProjectorModel) -> tuple[ProjectorM
             "harmonic but the fundamental)"
         )
 
+    # Patterns of two levels (square waves, codes) send only 0 and 255: g(0) and g(1) are
+    # the same for every gamma, which is then neither observable nor needed; blur alone.
+    binary = all(
+        np.isin(np.asarray(item["sequence"].profile(i), dtype=np.float64), (0.0, 1.0)).all()
+        for item in measured
+        for i in item["set"].indices
+    )
+
+    def parameters(x: np.ndarray) -> tuple[float, float]:
+        return (prior.gamma, x[0]) if binary else (x[0], x[1])
+
     def residuals(x: np.ndarray) -> np.ndarray:
-        model = _response_model(prior, x[0], x[1])
+        model = _response_model(prior, *parameters(x))
         out = []
         for item in measured:
             m1, qs = response_harmonics(model, item["sequence"], item["set"])
@@ -341,17 +367,18 @@ def _fit_response(views: list[_View], prior: ProjectorModel) -> tuple[ProjectorM
         return np.asarray(out)
 
     starts = [(2.0, 0.5), (1.0, 0.5), (2.5, 2.0)]
+    low, high = [0.2, 0.0], [6.0, 20.0]
+    if binary:
+        starts, low, high = [(0.5,), (2.0,)], low[1:], high[1:]
     best = min(
-        (
-            least_squares(residuals, start, bounds=([0.2, 0.0], [6.0, 20.0]), diff_step=1e-4)
-            for start in starts
-        ),
+        (least_squares(residuals, start, bounds=(low, high), diff_step=1e-4) for start in starts),
         key=lambda result: result.cost,
     )
-    gamma, sigma = (float(v) for v in best.x)
+    gamma, sigma = (float(v) for v in parameters(best.x))
     model = _response_model(prior, gamma, sigma)
     report = {
         "gamma": gamma,
+        "gamma_observable": not binary,
         "psf_sigma_px": sigma,
         "fill_factor": prior.fill_factor,
         "rms_relative_residual": float(np.sqrt(np.mean(best.fun**2))),
@@ -413,7 +440,13 @@ def _fit_shading(views: list[_View]) -> dict[str, Any]:
         x - dummies @ np.linalg.lstsq(dummies, x, rcond=None)[0] for x in (camera, projector)
     ]
     correlation = float(abs(np.corrcoef(centred[0], centred[1])[0, 1]))
-    separable = correlation < SEPARABLE_MAX_CORRELATION and errors.max() < SEPARABLE_MAX_STDERR
+    # A lens (and a light engine) darkens toward its field's edge: a negative exponent is
+    # the two regressors trading off against each other (one flat pose), not a lens.
+    separable = (
+        correlation < SEPARABLE_MAX_CORRELATION
+        and errors.max() < SEPARABLE_MAX_STDERR
+        and min(coef[count], coef[count + 1]) >= 0.0
+    )
     report: dict[str, Any] = {
         "separable": bool(separable),
         "regressor_correlation": correlation,
@@ -429,7 +462,8 @@ def _fit_shading(views: list[_View]) -> dict[str, Any]:
         report.update(product_exponent_stderr=float(np.sqrt(cov[count, count])))
         report["note"] = (
             "camera vignetting and projector fall-off cannot be told apart from these "
-            "captures: one exponent of their product is fitted and given to both"
+            "captures (capture planes at several distances and tilts): one exponent of their "
+            "product is fitted and given to both"
         )
     report.update(
         camera_exponent=n_camera,
@@ -441,15 +475,26 @@ def _fit_shading(views: list[_View]) -> dict[str, Any]:
     return report
 
 
-def _stored_cos4(exponent: float) -> str:
-    """The model's setting nearest a fitted exponent: ``cos4`` or ``none``."""
-    return "cos4" if exponent > COS4 / 2 else "none"
+def _stored_exponent(exponent: float) -> float | None:
+    """The ``cos`` model's exponent for a fitted one (rounded, capped), None for ``none``."""
+    stored = round(min(exponent, MAX_COS_EXPONENT), EXPONENT_DECIMALS)
+    return stored if stored > 0 else None
 
 
 def _rounding_error(exponent: float, cos_min: float) -> float:
-    """Relative error at the field's edge of storing ``exponent`` as ``cos4`` or ``none``."""
-    stored = COS4 if _stored_cos4(exponent) == "cos4" else 0.0
+    """Relative error at the field's edge of storing ``exponent`` as the model does."""
+    stored = _stored_exponent(exponent) or 0.0
     return float(cos_min ** (stored - exponent) - 1.0)
+
+
+def _shading_models(shading: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The sensor's and the projector's fall-off settings for the fitted exponents."""
+    camera = _stored_exponent(shading["camera_exponent"])
+    projector = _stored_exponent(shading["projector_exponent"])
+    return (
+        {"vignetting": "none" if camera is None else "cos", "vignetting_exponent": camera},
+        {"falloff": "none" if projector is None else "cos", "falloff_exponent": projector},
+    )
 
 
 def _fit_ambient(
@@ -597,6 +642,7 @@ def fit_photometry(
     prior_sensor: Sensor | None = None,
     prior_projector: ProjectorModel | None = None,
     albedo: float = 1.0,
+    regions: list[np.ndarray | None] | None = None,
 ) -> PhotometricFit:
     """Fit the twin's camera and projector models to real captures (module docstring).
 
@@ -612,6 +658,9 @@ def fit_photometry(
         (the black level the ambient light is measured above) and fill factor (default:
         infinite contrast, fill factor 1).
     albedo : diffuse albedo of the captured surface where it is lit (sets the exposure).
+    regions : per capture, None or an (H, W) bool mask of the pixels showing a surface of
+        that one albedo (a board's white circles, say, eroded off their edges): the fit
+        assumes a uniform albedo and uses only these pixels.
 
     Raises
     ------
@@ -626,7 +675,14 @@ def fit_photometry(
     sensor = prior_sensor or Sensor(bit_depth=depths.pop())
     sensor = sensor.with_(bit_depth=int(captures[0].bit_depth))  # type: ignore[arg-type]
     prior = prior_projector or ProjectorModel()
-    views = [_view(capture, rig or capture.rig, sensor) for capture in captures]
+    if regions is not None and len(regions) != len(captures):
+        expected = f"one mask (or None) per capture ({len(captures)})"
+        raise InputError("regions", expected, len(regions))
+    masks = regions if regions is not None else [None] * len(captures)
+    views = [
+        _view(capture, rig or capture.rig, sensor, region)
+        for capture, region in zip(captures, masks, strict=True)
+    ]
     if sum(v.pixels.size for v in views) < 100:
         raise DegenerateData("photometric fit: fewer than 100 valid pixels in the captures")
     projector, response = _fit_response(views, prior)
@@ -637,14 +693,20 @@ def fit_photometry(
     exposures = np.exp(shading["log_scale"]) / (albedo * (1.0 - projector.black))
     shading.update(
         exposure_per_capture=exposures.tolist(),
-        camera_stored=_stored_cos4(shading["camera_exponent"]),
-        projector_stored=_stored_cos4(shading["projector_exponent"]),
+        camera_stored=_stored_exponent(shading["camera_exponent"]),
+        projector_stored=_stored_exponent(shading["projector_exponent"]),
         camera_edge_error=_rounding_error(shading["camera_exponent"], shading["camera_cos_min"]),
         projector_edge_error=_rounding_error(
             shading["projector_exponent"], shading["projector_cos_min"]
         ),
     )
+    vignetting, falloff = _shading_models(shading)
     notes = []
+    if not response["gamma_observable"]:
+        notes.append(
+            "the phase frames have two levels (square waves): gamma is not observable and "
+            f"not needed, the prior's {projector.gamma:g} is kept"
+        )
     if noise["system_gain_dn_per_e"] <= 0:
         notes.append("no photon transfer slope: the prior sensor's noise is kept")
         gain, dark_noise = sensor.system_gain_dn_per_e, sensor.dark_noise_e
@@ -655,10 +717,10 @@ def fit_photometry(
         system_gain_dn_per_e=gain,
         dark_noise_e=dark_noise,
         dark_current_e_per_s=0.0,
-        vignetting=shading["camera_stored"],
+        **vignetting,
         name="fitted",
     )
-    fitted_projector = projector.with_(falloff=shading["projector_stored"], name="fitted")
+    fitted_projector = projector.with_(**falloff, name="fitted")
     report = {
         "response": response,
         "shading": shading,

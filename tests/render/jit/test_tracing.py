@@ -61,6 +61,10 @@ CASES = {
         "projector": PROJECTOR_PRESETS["lightcrafter"],
     },
     "vignetting, 12 bit": {"sensor": Sensor(bit_depth=12, vignetting="cos4")},
+    "fitted cos^k vignetting and fall-off": {
+        "sensor": Sensor(bit_depth=12, vignetting="cos", vignetting_exponent=3.2),
+        "projector": ProjectorModel(falloff="cos", falloff_exponent=5.7),
+    },
     "interreflections": {"settings": {"bounces": 2, "spp": 1}},
     "projector defocus": {
         "settings": {
@@ -225,7 +229,7 @@ def test_frames_are_handed_to_pytorch_without_a_copy() -> None:
 def test_scenes_that_read_files_are_not_cached(tmp_path) -> None:
     import trimesh
 
-    from virtus.render.tracing import _reads_files
+    from virtus.render.mitsuba_scene import reads_files as _reads_files
     from virtus.scene.model import MeshObject, Scene
 
     path = tmp_path / "box.stl"
