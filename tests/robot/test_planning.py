@@ -96,3 +96,21 @@ def test_bad_trajectories_are_refused(tmp_path: Path) -> None:
     path.write_text(json.dumps({"q": [[0.0] * 7], "joint_names": ["a"] * 7}))
     with pytest.raises(InputError, match="joint_names"):
         load_trajectory(path, setup)
+
+
+def test_planning_without_a_ray_index_names_the_missing_package(monkeypatch):
+    # trimesh needs rtree or embreex to cast rays; without either, one line says what to
+    # install instead of a ModuleNotFoundError from inside trimesh (seen on a GPU host).
+    import importlib.util
+
+    from virtus.errors import MissingDependency
+    from virtus.robot import planning
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util,
+        "find_spec",
+        lambda name, *a: None if name in ("embreex", "rtree") else real(name, *a),
+    )
+    with pytest.raises(MissingDependency, match=r"rtree or embreex"):
+        planning._require_ray_index()

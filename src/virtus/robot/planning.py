@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from virtus.errors import InputError
+from virtus.errors import InputError, MissingDependency
 from virtus.geometry.devices import Rig
 from virtus.geometry.transforms import Pose
 from virtus.io.runs import write_json_atomic
@@ -109,6 +109,7 @@ def _sees(
     ok &= np.einsum("ij,ij->i", direction, normals) >= cos_limit
     index = np.flatnonzero(ok)
     if index.size and occluders is not None:
+        _require_ray_index()
         origins = points[index] + normals[index] * settings.offset_m
         hits, rays = occluders.ray.intersects_location(
             origins, direction[index], multiple_hits=False
@@ -118,6 +119,18 @@ def _sees(
             blocked = rays[along < distance[index[rays]] - settings.offset_m]
             ok[index[blocked]] = False
     return ok, depth
+
+
+def _require_ray_index() -> None:
+    """trimesh casts rays through Embree (``embreex``) or an R-tree (``rtree``); with neither
+    it fails deep inside with a bare ``ModuleNotFoundError`` (seen on a GPU host)."""
+    import importlib.util
+
+    if not any(importlib.util.find_spec(name) for name in ("embreex", "rtree")):
+        raise MissingDependency(
+            "view planning casts rays with trimesh, which needs rtree or embreex: "
+            "pip install 'virtus-fpp[robot]'"
+        )
 
 
 def view_coverage(
