@@ -9,6 +9,11 @@ its local +z side), the environment a ``constant`` emitter.
 
 from __future__ import annotations
 
+import functools
+import os
+import time
+from collections.abc import Iterator
+from pathlib import Path
 from types import ModuleType
 from typing import Any
 
@@ -16,6 +21,7 @@ import numpy as np
 
 from virtus.errors import InputError
 from virtus.geometry.transforms import Pose
+from virtus.render.backend import mitsuba
 from virtus.scene.model import (
     AreaLight,
     BoxObject,
@@ -179,10 +185,92 @@ def scene_dict(mi: ModuleType, dr: ModuleType, scene: Scene) -> dict[str, Any]:
 def check_in_front(scene: Scene, world2cam: Pose) -> None:
     """Raise :class:`InputError` naming any object that lies entirely behind the camera."""
     for obj, name in zip(scene.all_objects(), scene.object_names(), strict=True):
-        z = world2cam.apply(obj.bounds_world())[:, 2]
+        z = world2cam.apply(_bounds_world(obj))[:, 2]
         if z.max() <= 0:
             raise InputError(
                 f"scene.{name}",
                 "an object in front of the camera (z > 0 in the camera frame)",
                 f"all of it at z <= {z.max():.3g} m",
             )
+
+
+#: A file modified less than this long (seconds) before a load is not cached: where file
+#: times are coarse, an edit within the same tick would leave its signature unchanged.
+_RECENT_S = 2.0
+
+
+def load_scene(variant: str, scene: Scene) -> Any:
+    """The Mitsuba scene of ``scene`` in ``variant``. Poses of one scene (a calibration's
+    camera moves, a turntable's views, a dataset's object, a benchmark) reuse the last two
+    loaded: its BVH build is ~1.5 ms of a ~10 ms GPU pass, and reading and building a
+    328k-face mesh file much more. A scene that reads files (meshes, texture images) is
+    reused only while every file keeps its identity, size and modification time (and was
+    not modified within :data:`_RECENT_S`), so an edited file is never rendered stale."""
+    try:
+        signature = _file_signature(scene)
+        if signature is not None:
+            return _cached_scene(variant, scene, signature)
+    except TypeError:  # a scene holding unhashable values is loaded each time
+        pass
+    mi, dr, _ = mitsuba(variant)
+    return mi.load_dict(scene_dict(mi, dr, scene))
+
+
+def _paths(value: Any) -> Iterator[Path]:
+    """Every file a scene (or any model, list or tuple inside it) names."""
+    if isinstance(value, Path):
+        yield value
+    elif isinstance(value, list | tuple):
+        for item in value:
+            yield from _paths(item)
+    else:
+        for name in getattr(type(value), "model_fields", None) or ():
+            yield from _paths(getattr(value, name))
+
+
+def reads_files(value: Any) -> bool:
+    """True when a scene (or any model, list or tuple inside it) names a file."""
+    return next(_paths(value), None) is not None
+
+
+def _file_signature(scene: Any) -> tuple[tuple[Any, ...], ...] | None:
+    """``(path, device, inode, size, mtime_ns, ctime_ns)`` of each file a scene (or object) reads
+    (empty for none), or None where a file is missing (the loader says so) or recent."""
+    now, signature = time.time(), []
+    for path in _paths(scene):
+        try:
+            st = os.stat(path)
+        except OSError:
+            return None
+        if now - st.st_mtime < _RECENT_S:
+            return None
+        signature.append(
+            (os.path.abspath(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns,
+             st.st_ctime_ns)
+        )  # fmt: skip
+    return tuple(signature)
+
+
+@functools.lru_cache(maxsize=2)
+def _cached_scene(variant: str, scene: Scene, signature: tuple[tuple[Any, ...], ...]) -> Any:
+    mi, dr, _ = mitsuba(variant)
+    return mi.load_dict(scene_dict(mi, dr, scene))
+
+
+def _bounds_world(obj: Any) -> np.ndarray:
+    """``obj.bounds_world()``, kept while the object and its files are unchanged (a mesh's
+    bounds read the whole file: 0.15 s a pose for the 328k-face free-form object)."""
+    try:
+        signature = _file_signature(obj)
+        if signature is not None:
+            return _cached_bounds(obj, signature)
+    except TypeError:  # an unhashable object
+        pass
+    return obj.bounds_world()
+
+
+@functools.lru_cache(maxsize=16)
+def _cached_bounds(obj: Any, signature: tuple[tuple[Any, ...], ...]) -> np.ndarray:
+    bounds = np.array(obj.bounds_world(), dtype=np.float64)
+    bounds.setflags(write=False)
+    return bounds

@@ -263,21 +263,28 @@ def render(
             traced, weight=traced.weight * gain[:, None], ambient=traced.ambient * gain
         )
     exposure_value = sensor.exposure_for(traced.white)
-    # The sensor is pointwise, so it runs on each synthesised block (no float stack).
+    # The sensor is pointwise, so it runs on each synthesised block (no float stack), and
+    # the saturation mask is taken there too, while the block is in cache (blocks of one
+    # call cover disjoint pixels; the calls run one after the other).
     block = {} if block_pixels is None else {"block_pixels": block_pixels}
+    saturated = np.zeros(traced.height * traced.width, dtype=bool)
+
+    def digitize(values: np.ndarray, frames: np.ndarray, pixels: slice) -> np.ndarray:
+        digital = sensor.digitize(values, exposure_value, seed=seed, frames=frames, pixels=pixels)
+        saturated[pixels] |= (digital >= sensor.saturation_dn).any(axis=0)
+        return digital
+
     frames = synthesize(
         traced,
         sequence,
         projector,
         projector_intrinsics=intrinsics,
-        transform=lambda values, frames, pixels: sensor.digitize(
-            values, exposure_value, seed=seed, frames=frames, pixels=pixels
-        ),
+        transform=digitize,
         dtype=sensor.dtype,
         threads=threads,
         **block,
     )
-    saturated = (frames >= sensor.saturation_dn).any(axis=0)
+    saturated = saturated.reshape(traced.height, traced.width)
     return Rendering(
         frames=frames,
         gt=dataclasses.replace(traced.gt, mask_saturated=saturated),

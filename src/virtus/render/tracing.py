@@ -68,7 +68,6 @@ import dataclasses
 import functools
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -80,7 +79,7 @@ from virtus.geometry.devices import Rig
 from virtus.geometry.optics import Intrinsics, ThinLens
 from virtus.geometry.transforms import Pose
 from virtus.render.backend import mitsuba
-from virtus.render.mitsuba_scene import check_in_front, scene_dict
+from virtus.render.mitsuba_scene import check_in_front, load_scene
 from virtus.scene.model import Scene
 
 #: Rays traced per Mitsuba call: bounds memory (~100 B per ray inside Dr.Jit).
@@ -225,17 +224,55 @@ def _check_count(name: str, value: object, high: int) -> int:
     return count
 
 
+def _device_constants(mi: Any, dr: Any, kind: Any, values: np.ndarray) -> Any:
+    """A pose's constants as one small device array (one upload). The kernels read them
+    with ``dr.gather`` at fixed indices, so they are kernel parameters, not literals in the
+    kernels' source: the next pose (a calibration's board, a dataset's camera) reuses the
+    compiled kernels instead of compiling them again (0.1-0.6 s a pose on 2 CPU cores)."""
+    array = kind(np.ascontiguousarray(values).reshape(-1))
+    dr.eval(array)
+    return array
+
+
 class _Tracer:
     """Dr.Jit side of one pass: Mitsuba scene, camera and projector poses in its world."""
 
     def __init__(self, mi, dr, mscene, cam2world: Pose, proj2world: Pose) -> None:  # noqa: ANN001
         self.mi, self.dr, self.mscene = mi, dr, mscene
-        self.cam2world = mi.Transform4f(cam2world.matrix.tolist())
-        self.proj2world = mi.Transform4f(proj2world.matrix.tolist())
-        self.world2proj = mi.Transform4f(proj2world.inverse().matrix.tolist())
-        self.world2cam_R = cam2world.R.T  # noqa: N815
-        self.projector = mi.Point3f(*(float(x) for x in proj2world.t))
+        # Every per-pose value lives in one device array, read through _bind, float32 as
+        # Mitsuba's literals would be: floats 0-95 cam2world, proj2world, world2proj (each
+        # its 4 x 4 matrix, then its inverse transpose, row-major), 96-98 the projector's
+        # centre (world frame), 99-107 world2cam's rotation (row-major).
+        transforms = [
+            mi.ScalarTransform4f(pose.matrix.tolist())
+            for pose in (cam2world, proj2world, proj2world.inverse())
+        ]
+        host = [np.asarray(m, dtype=np.float32)
+                for t in transforms for m in (t.matrix, t.inverse_transpose)]  # fmt: skip
+        host += [np.asarray(proj2world.t, np.float32), cam2world.R.T.astype(np.float32)]
+        self._constants = _device_constants(
+            mi, dr, mi.Float, np.concatenate([a.reshape(-1) for a in host])
+        )
         self.has_lights = len(mscene.emitters()) > 0
+
+    def _bind(self, n: int) -> None:
+        """Set the pose's transforms (``cam2world``, ``proj2world``, ``world2proj``), the
+        projector's centre and ``world2cam_R`` for kernels of ``n`` lanes: gathers at fixed
+        indices of the pose's constants, so the kernels' source is the same for every pose
+        (a width-1 value would cost a copy launch per entry, a literal a compilation)."""
+        mi, dr, constants = self.mi, self.dr, self._constants
+
+        def entry(index: int) -> Any:
+            return dr.gather(mi.Float, constants, dr.full(mi.UInt32, index, n))
+
+        def matrix(k: int) -> Any:
+            return mi.Matrix4f([[entry(16 * k + 4 * i + j) for j in range(4)] for i in range(4)])
+
+        self.cam2world, self.proj2world, self.world2proj = (
+            mi.Transform4f(matrix(2 * k), matrix(2 * k + 1)) for k in range(3)
+        )
+        self.projector = mi.Point3f(entry(96), entry(97), entry(98))
+        self.world2cam_R = [[entry(99 + 3 * i + j) for j in range(3)] for i in range(3)]  # noqa: N815
 
     def _rays(self, directions):  # noqa: ANN001, ANN202
         mi = self.mi
@@ -299,6 +336,8 @@ class _Tracer:
 
         Points are ``t * d`` in float64 with Mitsuba's (float32) distance ``t``."""
         mi, dr = self.mi, self.dr
+        lanes = dr.width(d[0])
+        self._bind(lanes)
         si = self.mscene.ray_intersect(self._rays(mi.Vector3f(*(mi.Float(c) for c in d))))
         hit = si.is_valid()
         occluded = self.mscene.ray_test(si.spawn_ray_to(self.projector), hit)
@@ -307,13 +346,14 @@ class _Tracer:
         # Shading normal, world -> camera frame, turned toward the camera (two-sided).
         n = si.sh_frame.n
         R = self.world2cam_R  # noqa: N806
-        normal = [float(R[i, 0]) * n.x + float(R[i, 1]) * n.y + float(R[i, 2]) * n.z
-                  for i in range(3)]  # fmt: skip
+        normal = [R[i][0] * n.x + R[i][1] * n.y + R[i][2] * n.z for i in range(3)]
         facing = normal[0] * d[0] + normal[1] * d[1] + normal[2] * d[2] > 0
         normal = [dr.select(hit, dr.select(facing, -c, c), dr.nan) for c in normal]
-        Rp, tp = cam2proj.R, cam2proj.t  # noqa: N806
-        x = [float(Rp[i, 0]) * point[0] + float(Rp[i, 1]) * point[1]
-             + float(Rp[i, 2]) * point[2] + float(tp[i]) for i in range(3)]  # fmt: skip
+        rt = _device_constants(mi, dr, mi.Float64, cam2proj.matrix[:3])
+        Rt = [[dr.gather(mi.Float64, rt, dr.full(mi.UInt32, 4 * i + j, lanes)) for j in range(4)]  # noqa: N806
+              for i in range(3)]  # fmt: skip
+        x = [Rt[i][0] * point[0] + Rt[i][1] * point[1] + Rt[i][2] * point[2] + Rt[i][3]
+             for i in range(3)]  # fmt: skip
         # A true division: dr.rcp may be an approximation on GPUs (rcp.approx.f64).
         in_front = x[2] > 0
         xn = dr.select(in_front, x[0] / x[2], dr.nan)
@@ -409,6 +449,7 @@ class _Tracer:
         """
         mi, dr = self.mi, self.dr
         n = dr.width(directions) if isinstance(directions, mi.Vector3f) else directions.shape[1]
+        self._bind(n)
         if camera_lens is None:
             ray = self._rays(directions)
         else:
@@ -542,38 +583,6 @@ class Pass:
         }
 
 
-def _mitsuba_scene(variant: str, scene: Scene) -> Any:
-    """The Mitsuba scene of ``scene``; poses of one scene (a calibration's camera moves, a
-    turntable's views, a benchmark) reuse the last two loaded (its BVH build is ~1.5 ms
-    of a ~10 ms GPU pass). Scenes that read files (meshes, texture images) are loaded each
-    time, so an edited file is never rendered stale."""
-    if not _reads_files(scene):
-        try:
-            return _cached_scene(variant, scene)
-        except TypeError:  # a scene holding unhashable values is loaded each time
-            pass
-    mi, dr, _ = mitsuba(variant)
-    return mi.load_dict(scene_dict(mi, dr, scene))
-
-
-def _reads_files(value: Any) -> bool:
-    """True when a scene (or any model, list or tuple inside it) names a file."""
-    if isinstance(value, Path):
-        return True
-    if isinstance(value, list | tuple):
-        return any(_reads_files(item) for item in value)
-    fields = getattr(type(value), "model_fields", None)
-    if fields is None:
-        return False
-    return any(_reads_files(getattr(value, name)) for name in fields)
-
-
-@functools.lru_cache(maxsize=2)
-def _cached_scene(variant: str, scene: Scene) -> Any:
-    mi, dr, _ = mitsuba(variant)
-    return mi.load_dict(scene_dict(mi, dr, scene))
-
-
 def prepare_pass(
     rig: Rig,
     scene: Scene,
@@ -611,7 +620,7 @@ def prepare_pass(
     check_in_front(scene, cam2world.inverse())
 
     mi, dr, variant_name = mitsuba(variant)
-    mscene = _mitsuba_scene(variant_name, scene)
+    mscene = load_scene(variant_name, scene)
 
     camera = rig.camera.intrinsics
     height, width = camera.height, camera.width
@@ -738,8 +747,11 @@ def trace(
     if "lights" in s:
         ambient += s["lights"].reshape(n_pixels, spp).mean(axis=1, dtype=np.float32)
     weight = weight.reshape(n_pixels, spp * taps)
-    per_vertex = _by_vertex(weight, bounces, aperture_samples)
-    multibounce = (per_vertex[1:].sum(axis=0) > per_vertex[0]).reshape(height, width)
+    if bounces == 1:  # no light from later vertices (summing the taps cost 0.1 s a pose)
+        multibounce = np.zeros((height, width), dtype=bool)
+    else:
+        per_vertex = _by_vertex(weight, bounces, aperture_samples)
+        multibounce = (per_vertex[1:].sum(axis=0) > per_vertex[0]).reshape(height, width)
     gt = dataclasses.replace(truth, mask_multibounce=multibounce)
     return Trace(
         height=height,

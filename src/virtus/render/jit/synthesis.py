@@ -137,7 +137,11 @@ def synthesize_on_device(
                 mi, dr, trace.variant, sensor, seed, frame - first, pixel, n_pixels,
                 all_frames[first : first + count],
             )  # fmt: skip
-        digital = integer(sensor.digitize_jit(radiance, exposure, dr, noise))
+        # The exposure (a pose's auto exposure) enters as an opaque variable, so the kernel
+        # compiled for one pose serves the next: radiance * exposure is the same float32
+        # product, and digitize_jit's own factor 1.0 leaves it unchanged.
+        radiance = radiance * dr.opaque(mi.Float, float(exposure))
+        digital = integer(sensor.digitize_jit(radiance, 1.0, dr, noise))
         if count == n_frames:  # one kernel makes the whole stack: no scatter, no zero fill
             out = digital
         else:

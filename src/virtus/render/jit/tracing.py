@@ -407,7 +407,8 @@ def trace_device(
         dr.eval(weight, u_p, v_p, *per_sample.values())
     ambient = None
     if "rho_d" in per_sample:
-        ambient = float(scene.ambient) * dr.block_sum(per_sample["rho_d"], ps.spp) / ps.spp
+        level = dr.opaque(mi.Float, float(scene.ambient))  # a scene's value, not a literal
+        ambient = level * dr.block_sum(per_sample["rho_d"], ps.spp) / ps.spp
     if "lights" in per_sample:
         lights = dr.block_sum(per_sample["lights"], ps.spp) / ps.spp
         ambient = lights if ambient is None else ambient + lights
@@ -445,7 +446,9 @@ def percentile_of_positive(values: Any, q: float) -> float | None:
     buckets = {rank: int(np.searchsorted(cumulative, rank, side="right")) for rank in ranks}
     for bucket in sorted(set(buckets.values())):  # usually both ranks share one bucket
         before = int(cumulative[bucket - 1]) if bucket else 0
-        low = np.cumsum(_histogram(mi, dr, bits & 0xFFFF, positive & (high == bucket)))
+        # The bucket is opaque: one compiled kernel for every pose's bucket.
+        inside = positive & (high == dr.opaque(mi.UInt32, bucket))
+        low = np.cumsum(_histogram(mi, dr, bits & 0xFFFF, inside))
         for rank in (r for r, b in buckets.items() if b == bucket):
             index = int(np.searchsorted(low, rank - before, side="right"))
             found[rank] = np.array([(bucket << 16) | index], dtype=np.uint32).view(np.float32)[0]

@@ -1,0 +1,108 @@
+"""Compiled kernels are reused from pose to pose (:mod:`virtus.render.tracing` and the
+device path of :mod:`virtus.render.jit`).
+
+A calibration moves the board, a dataset the camera, and the auto exposure changes with
+every pose: if any such value were baked into a kernel's source as a literal, every pose
+would compile its kernels again (0.1-0.6 s a pose on 2 CPU cores, more than the pose's
+whole render). Dr.Jit names a kernel by the hash of its source, so the same hashes for
+two different poses prove the kernels are reused, whatever the on-disk cache holds.
+"""
+
+from __future__ import annotations
+
+import gc
+
+import numpy as np
+import pytest
+
+from tests.support import small_rig
+from virtus.geometry.transforms import Pose
+from virtus.patterns import default_sequence
+from virtus.render import RenderSettings, render, render_device
+from virtus.render.backend import mitsuba
+from virtus.render.mitsuba_scene import _cached_scene
+from virtus.scene.model import Scene, SphereObject, default_scene
+from virtus.sensor.camera import SENSOR_PRESETS, Sensor
+from virtus.sensor.projector import ProjectorModel
+
+VARIANT = "llvm_ad_rgb"
+SETTINGS = RenderSettings(variant=VARIANT)
+#: Three camera poses about the sphere 1 m ahead, each seeing it differently (and so
+#: getting a different auto exposure).
+POSES = (
+    Pose.from_euler("xyz", [0.5, -1.0, 0.3], t=(0.004, 0.0, 0.0)),
+    Pose.from_euler("xyz", [-1.5, 0.7, -0.4], t=(-0.01, 0.006, 0.02)),
+    Pose.from_euler("xyz", [2.0, 1.5, 1.0], t=(0.015, -0.01, -0.03)),
+)
+
+
+def kernel_hashes(function) -> list[str]:  # noqa: ANN001
+    """Hashes of the JIT kernels ``function()`` launches, in launch order."""
+    _, dr, _ = mitsuba(VARIANT)
+    with dr.scoped_set_flag(dr.JitFlag.KernelHistory):
+        dr.kernel_history_clear()
+        function()
+        dr.sync_thread()
+        history = dr.kernel_history()
+    return [k["hash"] for k in history if k["type"] == dr.KernelType.JIT]
+
+
+def device_pose(cam2world: Pose, scene: Scene, sensor: Sensor):  # noqa: ANN201
+    def run():  # noqa: ANN202
+        rendering = render_device(
+            small_rig(), scene, default_sequence(), SETTINGS, projector=ProjectorModel(),
+            sensor=sensor, seed=3, cam2world=cam2world,
+        )  # fmt: skip
+        rendering.trace.ground_truth()  # the pixel-centre rays' kernel too
+        return rendering
+
+    return run
+
+
+@pytest.mark.parametrize("sensor", ["ideal", "imx174"])
+def test_a_new_pose_reuses_the_device_paths_kernels(sensor: str) -> None:
+    scene, model = default_scene(), SENSOR_PRESETS[sensor]
+    kernel_hashes(device_pose(POSES[0], scene, model))  # the first pose compiles
+    second = kernel_hashes(device_pose(POSES[1], scene, model))
+    third = kernel_hashes(device_pose(POSES[2], scene, model))
+    assert len(second) >= 3  # trace, synthesis, ground truth at least
+    assert second == third
+
+
+def test_the_poses_really_differ() -> None:
+    # Guards the test above: the poses see different images, with different exposures.
+    runs = [device_pose(pose, default_scene(), Sensor())() for pose in POSES[1:]]
+    assert runs[0].exposure != runs[1].exposure
+    assert not np.array_equal(runs[0].frames.numpy(), runs[1].frames.numpy())
+
+
+def test_a_new_pose_reuses_the_host_paths_kernels() -> None:
+    def host_pose(cam2world: Pose):  # noqa: ANN202
+        return lambda: render(
+            small_rig(), default_scene(), default_sequence(), SETTINGS, cam2world=cam2world,
+            synthesis="sparse",
+        )  # fmt: skip
+
+    kernel_hashes(host_pose(POSES[0]))
+    second, third = (kernel_hashes(host_pose(pose)) for pose in POSES[1:])
+    assert len(second) >= 2  # the pixel-centre rays and the supersamples
+    assert second == third
+
+
+def test_a_scene_with_another_ambient_level_reuses_the_kernels() -> None:
+    def scene(ambient: float) -> Scene:
+        return Scene(
+            objects=(SphereObject(radius_m=0.1, center_m=(0.0, 0.0, 1.0)),),
+            background=default_scene().background,
+            ambient=ambient,
+        )
+
+    def fresh(ambient: float) -> list[str]:
+        # Each scene loaded alone: Mitsuba's BSDF registry (which the trace kernel's calls
+        # dispatch over) then looks the same to every one, as to a calibration's poses.
+        _cached_scene.cache_clear()
+        gc.collect()
+        return kernel_hashes(device_pose(POSES[0], scene(ambient), Sensor()))
+
+    fresh(0.05)
+    assert fresh(0.1) == fresh(0.2)
