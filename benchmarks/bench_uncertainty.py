@@ -8,12 +8,15 @@
    paper's pixel footprint). For each case, the predicted sigma of ``u_p`` and of depth
    against the standard deviation over ``--draws`` noisy re-renders
    (:func:`virtus.design.montecarlo.monte_carlo`): the ratio measured / predicted at the
-   median pixel, at the 95th percentile (raw and pooled over the 90-99th percentile band),
-   and whether the issue's bounds (10 % median, 20 % 95th percentile) hold.
+   median pixel and at the raw 95th percentile, and whether the issue's bounds (10 % median,
+   20 % raw 95th percentile) hold; with the ratio of the 90-99th percentile band pooled
+   (no sampling bias) as an extra column. The raw 95th percentile includes the draws' own
+   sampling inflation, printed for the draw count (1.08 for the default 200 draws, 1.21 for
+   30: :func:`virtus.design.montecarlo.p95_sampling_inflation`).
 2. **Design sweep**: ``virtus design`` with 12 variants (steps 3, 4, 9, 18 x period 12, 18,
    36 px), prediction only, ``--grid`` camera samples a side, timed with ``--workers``.
 
-    PYTHONPATH=src python benchmarks/bench_uncertainty.py [--draws 30] [--size 48]
+    PYTHONPATH=src python benchmarks/bench_uncertainty.py [--draws 200] [--size 48]
         [--grid 64] [--workers 1] [--json out.json]
 
 Runs on the CPU (Mitsuba's LLVM variant) by default; with ``VIRTUS_MITSUBA_VARIANT=cuda_ad_rgb``
@@ -33,6 +36,7 @@ import time
 import numpy as np
 
 from virtus.design import monte_carlo, run_design
+from virtus.design.montecarlo import DEFAULT_DRAWS, p95_sampling_inflation
 from virtus.geometry.devices import Camera, Rig, default_rig
 from virtus.geometry.optics import Intrinsics
 from virtus.geometry.transforms import Pose
@@ -74,6 +78,10 @@ def model_vs_monte_carlo(draws: int, size: int) -> list[dict]:
     header = f"{'scene':<7}{'sensor':<9}{'N':>3}{'T':>4}  " + " ".join(
         f"{q + ' ' + s:>15}" for q in ("u_p", "depth") for s in ("median", "p95", "p95 pooled")
     )
+    print(
+        f"raw 95th percentile: sampling spread alone lifts it to "
+        f"{p95_sampling_inflation(draws):.3f} on a constant sigma ({draws} draws)"
+    )
     print(header + f"{'ok':>5}{'orders':>8}")
     for scene_name, scene in scenes().items():
         for sensor_name, sensor in SENSORS.items():
@@ -95,7 +103,7 @@ def model_vs_monte_carlo(draws: int, size: int) -> list[dict]:
                             np.median(result.predicted[quantity])
                         )
                         ok &= abs(ratios["median"] - 1) <= 0.1
-                        ok &= abs(ratios["p95_pooled"] - 1) <= 0.2
+                        ok &= abs(ratios["p95_raw"] - 1) <= 0.2
                         cells += [ratios["median"], ratios["p95_raw"], ratios["p95_pooled"]]
                     row["within_bounds"] = bool(ok)
                     rows.append(row)
@@ -125,7 +133,8 @@ def sweep_timing(grid: int, workers: int) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--draws", type=int, default=30, help="noisy re-renders per case")
+    parser.add_argument("--draws", type=int, default=DEFAULT_DRAWS,
+                        help="noisy re-renders per case")  # fmt: skip
     parser.add_argument("--size", type=int, default=48, help="camera px a side (cropped)")
     parser.add_argument("--grid", type=int, default=64, help="sweep camera samples a side")
     parser.add_argument("--workers", type=int, default=1, help="sweep worker processes")

@@ -9,8 +9,10 @@ import pytest
 from tests.tolerances import (
     EMVA_VARIANCE_VS_DRAWS,
     FLOAT64_EXACT,
+    MODEL_VS_MC_DRAWS,
     MODEL_VS_MC_MEDIAN,
     MODEL_VS_MC_P95,
+    MODEL_VS_MC_P95_SAMPLING,
     PHASE_SIGMA_VS_DRAWS,
 )
 from virtus.errors import InputError
@@ -218,8 +220,9 @@ def test_predict_uncertainty_checks_its_maps():
 
 # --- the whole chain against Monte Carlo ----------------------------------------------------
 
-#: Noisy re-renders per case (the issue asks >= 30).
-DRAWS = 40
+#: Noisy re-renders per case (the issue asks >= 30): enough that the raw 95th percentile's
+#: sampling inflation is small (tests/tolerances.py).
+DRAWS = MODEL_VS_MC_DRAWS
 
 
 def _mc_scenes():
@@ -270,7 +273,17 @@ def assert_model_agrees(result) -> None:
     for quantity in ("u_p", "depth"):
         ratios = result.ratios(quantity)
         assert abs(ratios["median"] - 1) <= MODEL_VS_MC_MEDIAN, (quantity, ratios)
-        assert abs(ratios["p95_pooled"] - 1) <= MODEL_VS_MC_P95, (quantity, ratios)
+        assert abs(ratios["p95_raw"] - 1) <= MODEL_VS_MC_P95, (quantity, ratios)
+
+
+def test_the_draws_leave_the_raw_95th_percentile_little_sampling_inflation():
+    """The raw 95th percentile is held to the issue's 20 % with DRAWS draws: what sampling
+    spread alone adds there is the stated 8 %, not most of the 20 % (18 % with 40 draws)."""
+    from virtus.design.montecarlo import p95_sampling_inflation
+
+    inflation = p95_sampling_inflation(DRAWS)
+    assert inflation == pytest.approx(MODEL_VS_MC_P95_SAMPLING, abs=1e-3)
+    assert inflation - 1 <= MODEL_VS_MC_P95 / 2
 
 
 @pytest.fixture(scope="module")

@@ -526,14 +526,23 @@ HANDEYE_EXPECTED_RATIO = 2.0
 
 # --- uncertainty (predicted noise) --------------------------------------------------------
 #: predicted vs Monte Carlo sigma at the median pixel (issue 23's bound). The median of
-#: per-pixel standard deviations over 40 draws is itself within ~2 % (measured 0.95-1.02 over
-#: the whole matrix of benchmarks/bench_uncertainty.py with 30 draws).
+#: per-pixel standard deviations over 200 draws is itself within 0.2 % (measured 0.99-1.01
+#: over the whole matrix of benchmarks/bench_uncertainty.py with 200 draws; 0.95-1.02 with 30).
 MODEL_VS_MC_MEDIAN = 0.10
-#: predicted vs Monte Carlo sigma at the 95th percentile (issue 23's bound), pooled over the
-#: pixels between the 90th and 99th percentile of the prediction: a raw 95th percentile of
-#: per-pixel stds from 40 draws is inflated by their own sampling spread (+1.645 x 11 %,
-#: ~+18 %, measured +19-20 % on a plane of near-constant sigma), which is not model error.
+#: predicted vs Monte Carlo sigma at the raw 95th percentile (issue 23's bound, not
+#: loosened). Part of it is the draws' own sampling spread, not model error: per-pixel stds of
+#: n draws are sigma sqrt(chi2_{n-1} / (n - 1)), so on a constant sigma their 95th percentile
+#: is lifted by sqrt(chi2_{n-1}(0.95) / (n - 1)) -- 1.18 for 40 draws (measured +19-20 % on a
+#: plane), 1.082 for MODEL_VS_MC_DRAWS = 200 (MODEL_VS_MC_P95_SAMPLING): 8 of the 20 % go to
+#: sampling where sigma is flat (less where it varies), 12 % are left for the model.
+#: Measured over the bench's 36 cases with 200 draws: raw 0.99-1.07 (pooled 0.99-1.03).
 MODEL_VS_MC_P95 = 0.20
+#: noisy re-renders per Monte Carlo case (the issue asks >= 30; noise is re-applied to one
+#: noise-free pass, so draws are cheap).
+MODEL_VS_MC_DRAWS = 200
+#: the raw 95th percentile's expected inflation by sampling spread at MODEL_VS_MC_DRAWS
+#: draws (virtus.design.montecarlo.p95_sampling_inflation; scipy's chi2, to 1e-3).
+MODEL_VS_MC_P95_SAMPLING = 1.082
 #: first-order phase sigma vs 20,000 numpy draws (high SNR, B/sigma ~ 30: the linearisation
 #: error is ~1e-3; the draws' sampling spread is 1/sqrt(2 x 20000) = 0.5 %; 3 % = 6 sigma).
 PHASE_SIGMA_VS_DRAWS = 0.03

@@ -18,6 +18,7 @@ from virtus.design.acceptance import (
 from virtus.design.artefacts import artefact_layout
 from virtus.design.figures import (
     coordinate_sigma_px,
+    expected_fit_bias,
     expected_form_range,
     measure_sphere,
     radial_sigma,
@@ -31,6 +32,7 @@ from virtus.geometry.transforms import Pose
 from virtus.reconstruct import reconstruct
 from virtus.render import RenderSettings
 from virtus.scanner import Scanner
+from virtus.scene.model import Scene, SphereObject
 from virtus.sensor import Lookup, load_projector
 from virtus.sensor.camera import Sensor
 
@@ -134,6 +136,43 @@ def test_noise_form_error_follows_the_sensor_model(tmp_path):
     predicted = expected_form_range(sigma)
     assert np.median(sigma_uv) > 0.2  # projector px: well above the bilinear staircase
     assert measured == pytest.approx(predicted, rel=NOISE_FORM_REL)
+
+
+def test_dmd_size_error_is_the_sphere_fits_bias_from_the_staircase_not_an_offset():
+    """Why P_S < 0 with sharp DMD pixels, the ideal sensor and the true rig (figures' module
+    docstring): the decoded coordinates carry no offset (a half-pixel rounding slip would show
+    here as |mean| ~ 0.5 px), only the staircase's spread (0.19 px RMS at 480 px), and the
+    least-squares fit turns that spread into a smaller sphere as figures.expected_fit_bias
+    predicts. The guideline's sphere at the volume's centre, 480 px camera, moved by 8
+    sub-pixel steps (each draws the staircase anew); measured -0.089 +- 0.007 mm against
+    -0.086 mm."""
+    from virtus.design.artefacts import MATTE
+
+    scanner = _scanner(0.5, "nearest")
+    _, layout = artefact_layout(volume_from_rig(scanner.rig), positions=1)
+    radius = layout[0].radius_m
+    sizes, predicted = [], []
+    for step in range(8):
+        centre = np.asarray(layout[0].centres_m[0]) + step * np.array([0.37e-3, 0.23e-3, 1.1e-3])
+        scene = Scene(objects=(SphereObject(radius_m=radius, center_m=tuple(centre),
+                                            material=MATTE),))  # fmt: skip
+        decoded = scanner.capture(scene, rng=1).decode()
+        points = reconstruct(scanner.rig, decoded.proj_uv, interior(decoded.mask)).points
+        fit = measure_sphere(points, centre, radius)
+        cam_px = fit.pixels[:, ::-1].astype(float)
+        _, _, true_uv = sphere_normals(scanner.rig, cam_px, centre, radius)
+        error = decoded.proj_uv[fit.pixels[:, 0], fit.pixels[:, 1]] - true_uv
+        error = error[np.isfinite(error).all(axis=1)]
+        assert np.abs(error.mean(axis=0)).max() < 0.01  # projector px: no offset
+        rms = np.sqrt((error**2).mean(axis=0))
+        assert 0.1 < rms.min() and rms.max() < 0.3  # the staircase (uniform: 0.29 px)
+        sizes.append(fit.diameter_m - 2 * radius)
+        predicted.append(expected_fit_bias(scanner.rig, cam_px, centre, radius, rms, trials=8,
+                                           seed=step)[0])  # fmt: skip
+    measured = np.mean(sizes)
+    standard_error = np.std(sizes, ddof=1) / np.sqrt(len(sizes))
+    assert measured < -4 * standard_error  # a real bias, not chance
+    assert measured == pytest.approx(np.mean(predicted), abs=3 * standard_error)
 
 
 def test_planted_scale_error_shows_in_the_sphere_spacing(tmp_path):

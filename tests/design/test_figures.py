@@ -10,6 +10,7 @@ import pytest
 
 from virtus.design.figures import (
     EXCLUDED_FRACTION,
+    expected_fit_bias,
     expected_form_range,
     measure_plane,
     measure_sphere,
@@ -110,3 +111,27 @@ def test_projector_jacobian_moves_the_point_along_its_camera_ray():
         assert (along > 0.95).all()
     # one projector px of u_p is ~3 mm of depth at 1 m for this rig (f_p 1824 px, 9 deg)
     assert 1e-3 < np.linalg.norm(jac[0, :, 0]) < 5e-3
+
+
+def _seen(centre: np.ndarray, radius: float) -> np.ndarray:
+    """Every other camera pixel of the paper's 960 px camera that sees the sphere."""
+    v, u = np.mgrid[0:960:2, 0:960:2]
+    cam_px = np.stack([u.ravel(), v.ravel()], axis=1).astype(float)
+    points, _, _ = sphere_normals(RIG, cam_px, centre, radius)
+    return cam_px[np.isfinite(points).all(axis=1)]
+
+
+def test_the_sphere_fit_is_biased_small_by_the_variance_of_the_coordinate_errors():
+    """Errors in variables: zero-mean projector-coordinate errors make the geometric sphere fit
+    smaller (P_S < 0) with its centre nearer the camera, as their variance grows (measured:
+    -0.018 / -0.067 / -0.149 mm for 0.1 / 0.2 / 0.3 px on this 80 mm sphere), and not at all
+    without errors."""
+    cam_px = _seen(CENTRE, RADIUS)
+    exact, shift = expected_fit_bias(RIG, cam_px, CENTRE, RADIUS, 0.0, trials=1)
+    assert abs(exact) < 1e-9 and np.abs(shift).max() < 1e-9
+    small, shift_small = expected_fit_bias(RIG, cam_px, CENTRE, RADIUS, 0.1)
+    large, shift_large = expected_fit_bias(RIG, cam_px, CENTRE, RADIUS, 0.2)
+    assert large < small < -5e-6  # metres of diameter
+    assert large / small == pytest.approx(4.0, rel=0.15)  # the variance, not the sigma
+    assert shift_large[2] < shift_small[2] < 0  # toward the camera
+    assert shift_large[2] == pytest.approx(0.8 * large, rel=0.25)  # a cap's size and depth

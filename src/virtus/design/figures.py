@@ -31,6 +31,34 @@ Predicted (for design studies and for the tests that hold the job to physics):
 * :func:`expected_form_range`: P_F of pure noise: the mean over Monte Carlo trials of the
   range of independent normal radial errors of the given per-point sigma, after leaving out
   the same 0.3 % (for one sigma and many points, about ``2 sigma sqrt(2 ln n)``, DESIGN §12).
+* :func:`expected_fit_bias`: P_S (and the centre's shift) that zero-mean projector-coordinate
+  errors alone give the least-squares sphere fit: the mean over Monte Carlo trials of fits to
+  the exact points of the sphere re-triangulated from their true projector coordinates plus
+  independent normal errors of the given sigma.
+
+**The sphere fit is biased by large point errors (errors in variables).** A triangulated
+point's error runs along the triangulation's direction ``J``, not along the sphere's normal:
+its tangential part tilts the direction from the centre to the point in step with its radial
+part, and the geometric fit (minimising ``sum (|p - c| - r)^2``) trades that for a smaller
+sphere whose centre is nearer the camera. The bias grows as the errors' variance, does not
+average away with more points (it depends on how far toward its outline the cap is kept: with
+0.19 px errors -0.088 mm at a 480 px camera, -0.062 mm at 960 px), and is there whatever makes
+the errors (noise or the DMD staircase). Measured with the paper's rig and the guideline's
+sphere (82.6 mm at 1 m, 9-step heterodyne, ideal sensor, true rig, ``use="uv"``, ``nearest``
+lookup, the sphere moved by 12 / 6 sub-pixel steps): the DMD staircase leaves no offset in the
+decoded coordinates (decoded minus true: |mean| < 0.004 px, so no half-pixel rounding shift)
+but 0.19 px RMS in ``u_p`` and ``v_p`` at a 480 px camera and 0.14 px at 960 px, and P_S is
+-0.091 +- 0.008 mm (480 px) and -0.041 +- 0.003 mm (960 px, mean +- its standard error); this
+function with those RMS gives -0.088 and -0.042 mm. Bilinear lookup (0.01-0.02 px RMS) leaves
+-0.006 mm at 480 px. Each ball-bar sphere's centre moves toward the camera along its own line
+of sight (0.8 of its P_S), so their distance shrinks by about that shift times the angle
+between the lines of sight: over the 7 bar positions at 960 px SD is -0.016 mm measured, -0.014
+mm predicted (the 10 sphere positions: P_S -0.044 measured, -0.043 predicted;
+``benchmarks/bench_acceptance.py --fit-bias``).
+A real scanner with the same coordinate errors shows the same figures (VDI/VDE 2634-2
+prescribes this fit). Leaving out the outline pixels (:func:`virtus.design.acceptance.interior`)
+makes P_S more negative (-0.091 against -0.022 mm with them, 480 px) because the outline's
+partly covered pixels err outward and so offset part of the bias by accident.
 
 Units: metres and projector pixels inside; the JSON summaries in millimetres.
 """
@@ -61,6 +89,7 @@ __all__ = [
     "PlaneMeasurement",
     "SphereMeasurement",
     "coordinate_sigma_px",
+    "expected_fit_bias",
     "expected_form_range",
     "measure_plane",
     "measure_sphere",
@@ -149,6 +178,18 @@ def _lsq_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
     return fit.x[:3] + mean, float(fit.x[3])
 
 
+def _fit_sphere(points: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
+    """Least-squares sphere of ``points`` (N, 3) after leaving out the
+    :data:`EXCLUDED_FRACTION` farthest from a first fit: ``(centre, radius, kept indices)``."""
+    c, r = _lsq_sphere(points)
+    keep = np.arange(points.shape[0])
+    k = _excluded(points.shape[0])
+    if k:
+        keep = np.sort(np.argsort(-np.abs(np.linalg.norm(points - c, axis=1) - r))[k:])
+        c, r = _lsq_sphere(points[keep])
+    return c, r, keep
+
+
 def measure_sphere(
     point_map: np.ndarray, centre_m: object, radius_m: float, name: str = "sphere"
 ) -> SphereMeasurement:
@@ -168,12 +209,9 @@ def measure_sphere(
         raise VirtusError(
             f"acceptance: {points.shape[0]} points on {name} (need {MIN_POINTS}); is it seen?"
         )
-    c, r = _lsq_sphere(points)
-    k = _excluded(points.shape[0])
-    if k:
-        keep = np.sort(np.argsort(-np.abs(np.linalg.norm(points - c, axis=1) - r))[k:])
-        points, pixels = points[keep], pixels[keep]
-        c, r = _lsq_sphere(points)
+    c, r, keep = _fit_sphere(points)
+    k = points.shape[0] - keep.size
+    points, pixels = points[keep], pixels[keep]
     residual = np.linalg.norm(points - c, axis=1) - r
     return SphereMeasurement(
         c, 2 * r, float(residual.max() - residual.min()), int(points.shape[0]), k, pixels
@@ -316,3 +354,27 @@ def expected_form_range(sigma_m: np.ndarray, trials: int = 400, seed: int = 0) -
         kept = np.sort(np.argsort(-np.abs(draws))[k:])
         ranges[t] = draws[kept].max() - draws[kept].min()
     return float(ranges.mean())
+
+
+def expected_fit_bias(
+    rig: Rig, cam_px: np.ndarray, centre_m: object, radius_m: float, sigma_uv: object,
+    *, use: str = "uv", trials: int = 20, seed: int = 0,
+) -> tuple[float, np.ndarray]:  # fmt: skip
+    """The fit's own bias (module docstring): mean over ``trials`` of the fitted minus true
+    diameter (metres, P_S) and centre ``(3,)`` of a sphere seen at camera pixels ``cam_px``
+    (N, 2) ``(u, v)`` whose points are triangulated (``use``) from their true projector
+    coordinates plus independent normal errors of ``sigma_uv`` px (scalar, (2,) or (N, 2)),
+    fitted as :func:`measure_sphere` fits (0.3 % left out)."""
+    centre = np.asarray(centre_m, dtype=np.float64)
+    _, _, proj_uv = sphere_normals(rig, cam_px, centre, radius_m)
+    hit = np.isfinite(proj_uv).all(axis=1)
+    cam, proj = cam_px[hit], proj_uv[hit]
+    sigma = np.broadcast_to(np.asarray(sigma_uv, dtype=np.float64), proj_uv.shape)[hit]
+    gen = np.random.default_rng(seed)
+    sizes, centres = [], []
+    for _ in range(trials):
+        points = triangulate(rig, cam, proj + sigma * gen.standard_normal(proj.shape), use)
+        c, r, _ = _fit_sphere(points[np.isfinite(points).all(axis=1)])
+        sizes.append(2 * (r - radius_m))
+        centres.append(c - centre)
+    return float(np.mean(sizes)), np.mean(centres, axis=0)

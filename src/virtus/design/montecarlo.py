@@ -13,12 +13,18 @@ whose draws spread over a quarter period or more has had an order error (at silh
 where a pixel mixes two surfaces) and is counted apart (:attr:`MonteCarlo.order_errors`).
 
 Comparisons (:meth:`MonteCarlo.ratios`): measured over predicted at the median pixel
-(medians of both), and at the 95th percentile -- raw, and pooled (the root of the mean
-measured variance over the mean predicted variance of the pixels between the 90th and 99th
-percentile of the prediction). The per-pixel standard deviation of ``n`` draws has a relative
-sampling spread of ``1 / sqrt(2 (n - 1))`` (11 % for 40 draws), which alone lifts a raw 95th
-percentile by ~1.645 times that where sigma is nearly constant: the pooled ratio has no
-such bias.
+(medians of both) and at the 95th percentile (95th percentiles of both: ``p95_raw``, the
+issue's figure). The per-pixel standard deviation of ``n`` draws of a normal sigma is
+``sigma sqrt(chi2_{n-1} / (n - 1))``, so where sigma is nearly constant (a plane) the raw
+95th percentile of the measured sigmas is lifted by their own sampling spread alone, by
+:func:`p95_sampling_inflation` ``= sqrt(chi2_{n-1}(0.95) / (n - 1))``: 1.21 for 30 draws,
+1.18 for 40, 1.08 for 200 -- not model error. Draws are cheap (the noise is re-applied to one
+noise-free pass), so the check takes enough of them (:data:`DEFAULT_DRAWS`) that this
+inflation is small against the issue's 20 % bound. Where sigma varies over the pixels the
+inflation is smaller (the percentile then mostly ranks real differences). ``p95_pooled``,
+the root of the mean measured variance over the mean predicted variance of the pixels
+between the 90th and 99th percentile of the prediction, has no such bias and is reported
+beside it.
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.stats import chi2
 
 from virtus.design.modulation import predict_pass, signal_pass
 from virtus.errors import InputError
@@ -35,10 +42,22 @@ from virtus.reconstruct import as_use, triangulate
 from virtus.scanner import Scanner
 from virtus.uncertainty import finest_phase_set
 
-__all__ = ["MAX_DRAWS", "MonteCarlo", "monte_carlo"]
+__all__ = ["DEFAULT_DRAWS", "MAX_DRAWS", "MonteCarlo", "monte_carlo", "p95_sampling_inflation"]
 
 #: Most noisy draws of one check.
 MAX_DRAWS = 10_000
+#: Noisy draws of a check by default: the raw 95th percentile's sampling inflation is then
+#: 1.08 (:func:`p95_sampling_inflation`), small against the issue's 20 %.
+DEFAULT_DRAWS = 200
+
+
+def p95_sampling_inflation(draws: int) -> float:
+    """The factor by which sampling spread alone lifts the 95th percentile of per-pixel
+    standard deviations (``ddof=1``) of ``draws`` normal draws of one sigma:
+    ``sqrt(chi2_{draws-1}(0.95) / (draws - 1))`` (module docstring)."""
+    if isinstance(draws, bool) or not isinstance(draws, int) or draws < 2:
+        raise InputError("draws", "an integer >= 2", draws)
+    return float(np.sqrt(chi2.ppf(0.95, draws - 1) / (draws - 1)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,8 +80,9 @@ class MonteCarlo:
     draws: int
 
     def ratios(self, quantity: str) -> dict[str, float]:
-        """Measured over predicted: ``median``, ``p95_raw`` and ``p95_pooled`` (module
-        docstring)."""
+        """Measured over predicted: ``median``, ``p95_raw`` and ``p95_pooled``, and
+        ``p95_sampling``, what sampling spread alone makes ``p95_raw`` on a constant sigma
+        (:func:`p95_sampling_inflation`; module docstring)."""
         predicted, measured = self.predicted[quantity], self.measured[quantity]
         if predicted.size == 0:
             raise InputError("monte carlo", "pixels decoded in every draw", "none")
@@ -74,6 +94,7 @@ class MonteCarlo:
             "p95_pooled": float(
                 np.sqrt(np.mean(measured[band] ** 2) / np.mean(predicted[band] ** 2))
             ),
+            "p95_sampling": p95_sampling_inflation(self.draws),
         }
 
     def scaled(self, factor: float) -> MonteCarlo:
@@ -84,7 +105,7 @@ class MonteCarlo:
 
 
 def monte_carlo(
-    scanner: Scanner, scene: Any, draws: int = 40, *, use: str = "u", first_seed: int = 1
+    scanner: Scanner, scene: Any, draws: int = DEFAULT_DRAWS, *, use: str = "u", first_seed: int = 1
 ) -> MonteCarlo:
     """Predict one pose of ``scanner`` in ``scene`` and measure the spread of ``draws`` noisy
     re-renders (seeds ``first_seed ...``); see the module docstring."""
