@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -150,3 +151,27 @@ def test_phase_evaluation_with_decoded_orders(phase_run, learn_store, capsys) ->
     args = ["learn", "eval", phase_run, "--store", learn_store, "--unwrap", "guess"]
     code, _, err = run_cli(args, capsys)
     assert code == 2 and "unwrap" in err and len(err.strip().splitlines()) == 1
+
+
+def test_evaluate_saves_the_first_samples_depth_maps(learn_store, tmp_path) -> None:
+    """``evaluate`` keeps the predicted, true and error depth of its first samples (for the
+    run's report), each listed in the evaluation JSON with its checksum."""
+    from virtus.io.runs import file_digest
+    from virtus.learn.training import MAP_LAYERS, MAP_SAMPLES
+
+    run = tmp_path / "run"
+    train(config("unet", epochs=1), learn_store, run)
+    summary = evaluate(run, learn_store, None, name="all")
+    assert len(summary["maps"]) == MAP_SAMPLES
+    for entry in summary["maps"]:
+        file = run / "evaluations" / entry["file"]
+        assert entry["layers"] == list(MAP_LAYERS) and file_digest(file) == entry["sha256"]
+        predicted, true, error = np.load(file).astype(np.float64)
+        assert np.isfinite(true).mean() > 0.5  # a sphere before a plane: mostly surface
+        assert np.array_equal(np.isnan(error), np.isnan(true) | np.isnan(predicted))
+        assert np.array_equal(np.isnan(predicted), np.isnan(true) | np.isnan(predicted))
+        finite = np.isfinite(error)
+        assert np.allclose(error[finite], predicted[finite] - true[finite], atol=1e-3)  # mm
+        assert 100 < np.nanmedian(true) < 5000  # millimetres, not metres
+    on_disk = json.loads((run / "evaluations" / "all.json").read_text())
+    assert on_disk["maps"] == summary["maps"]

@@ -49,7 +49,7 @@ FLAGS = (
     "--window-size=1400,1000",
 )
 #: Least number of non-background pixels of a drawn 3D view (the 160 px scans give 20,000+
-#: points at 2 px each; an empty or failed canvas has none).
+#: points at 2 px each, the 64 px robot view ~4,000; an empty or failed canvas has none).
 MIN_CLOUD_PIXELS = 500
 
 #: Figures each kind's report must show (ids of ``figure``/3D blocks in the page).
@@ -77,6 +77,27 @@ EXPECTED = {
     "dataset": (
         "fig-gallery-sample-0-frame", "fig-gallery-sample-0-depth",
         "fig-gallery-sample-0-wrapped", "fig-gallery-sample-3-frame",
+    ),
+    "acceptance": (
+        "fig-acceptance-figure-p-f", "fig-acceptance-figure-p-s", "fig-acceptance-figure-sd",
+        "fig-acceptance-figure-f",
+    ),
+    "predict": (
+        "fig-prediction-sigma-u-p", "fig-prediction-sigma-depth", "fig-prediction-sigma-point",
+        "fig-prediction-mask",
+    ),
+    "design": ("fig-design-figures-sweep-sigma-depth-um-median-steps",),
+    "robot-scan": (
+        "fig-cloud-to-mesh-distance-kinematics-alone-c2m-histogram-0",
+        "fig-first-view-000-decode-wrapped-phase-v", "view-3d-view-cloud",
+    ),
+    "learn": (
+        "fig-training-loss", "fig-evaluation-store-all-sample-0-predicted-depth",
+        "fig-evaluation-store-all-sample-0-error",
+    ),
+    "twin": (
+        "fig-twin-validation-real-against-virtual-differences-0", "fig-twin-maps-pose-0-white",
+        "fig-twin-maps-pose-0-proj-uv", "fig-twin-maps-pose-1-code",
     ),
 }  # fmt: skip
 
@@ -144,7 +165,7 @@ def _cloud_pixels(driver, ident: str) -> int:
 
 @pytest.mark.parametrize("kind", sorted(EXPECTED))
 def test_report_opens_whole_in_a_browser(kind, request, browser, artifacts, tmp_path) -> None:
-    run_dir = request.getfixturevalue(f"{kind}_run")
+    run_dir = request.getfixturevalue(f"{kind.replace('-', '_')}_run")
     report = write_report(run_dir, tmp_path / f"{kind}.html")  # the session run stays as made
     assert report.kind == kind
     _open(browser, report.path)

@@ -4,6 +4,7 @@ for the same run, and the size bound of the default demo's report (5 MB)."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -119,3 +120,38 @@ def test_default_demo_report_is_at_most_5_mb(tmp_path) -> None:
     assert size <= DEMO_REPORT_MAX_BYTES, size
     text = report.read_text(encoding="utf-8")
     assert f"{MAX_POINTS:,} of " in text  # the cloud is subsampled to the viewer's bound
+
+
+def _resume_argv(kind: str, session, run_dir) -> list:  # noqa: ANN001
+    """The session run's own command line again, resumed in ``run_dir`` (a copy of the
+    session's run; its inputs stay where they are): nothing is rendered again."""
+    folder = session.parent
+    if kind == "acceptance":
+        return ["acceptance", "--rig", folder / "rig240.json", "--out", run_dir, "--true-rig",
+                "--positions", "1", "--lookup", "bilinear", "--limits",
+                "P_F=5,P_S=1,SD=1,F=1", "--resume", "--quiet"]  # fmt: skip
+    return ["robot-scan", "--robot", folder / "robot.yaml", "--trajectory",
+            folder / "trajectory.json", "--spp", "1", "--out", run_dir, "--resume",
+            "--quiet"]  # fmt: skip
+
+
+@pytest.mark.parametrize("kind", ["acceptance", "robot-scan"])
+def test_acceptance_and_robot_scan_write_their_report(kind, request, tmp_path) -> None:
+    import shutil
+
+    session = request.getfixturevalue(f"{kind.replace('-', '_')}_run")
+    run_dir = Path(shutil.copytree(session, tmp_path / session.name))
+    run_cli([*_resume_argv(kind, session, run_dir), "--no-report"])
+    assert not (run_dir / REPORT_FILE).exists()
+    run_cli(_resume_argv(kind, session, run_dir))
+    assert (run_dir / REPORT_FILE).stat().st_size > 10_000
+
+
+def test_learn_eval_writes_the_runs_report(learn_run, learn_store_small, tmp_path) -> None:
+    import shutil
+
+    run_dir = Path(shutil.copytree(learn_run, tmp_path / "learn"))
+    run_cli(["learn", "eval", run_dir, "--store", learn_store_small, "--split", "test",
+             "--quiet"])  # fmt: skip
+    text = (run_dir / REPORT_FILE).read_text()
+    assert "Evaluation store-test" in text and "Evaluation store-all" in text

@@ -15,6 +15,7 @@ from virtus.cli.options import (
     scanner_options,
 )
 from virtus.cli.output import JsonOption, Output, QuietOption, Summary
+from virtus.cli.report_cmd import NoReportOption, add_report
 
 DEFAULT_OUT = Path("virtus-acceptance")
 
@@ -69,6 +70,7 @@ def acceptance(
         bool,
         typer.Option("--resume", help="Continue an interrupted run in OUT (same settings)."),
     ] = False,
+    no_report: NoReportOption = False,
     json_out: JsonOption = False,
     quiet: QuietOption = False,
 ) -> None:
@@ -115,6 +117,7 @@ def acceptance(
     data["rig"] = result.summary["rig"]["kind"]
     summary = Summary(data, _print_summary)
     summary.add("acceptance", out / "acceptance.json", f"wrote {out / 'acceptance.json'}")
+    add_report(output, summary, out, no_report)
     output.emit(summary)
 
 

@@ -8,20 +8,27 @@ from typing import Annotated
 import typer
 
 from virtus.cli.output import JsonOption, Output, QuietOption, Summary
+from virtus.cli.report_cmd import NoReportOption, add_report
 
 DeviceOption = Annotated[
     str | None, typer.Option(help="torch device (default: cuda when available, else cpu).")
 ]
 
 
-def _emit(summary: dict, json_out: bool, quiet: bool) -> None:
+def _emit(
+    summary: dict, json_out: bool, quiet: bool, report: tuple[Path, bool] | None = None
+) -> None:
+    """Print ``summary``; with ``report = (run, no_report)`` write the run's report first."""
     lines = []
     for key, value in summary.items():
         if isinstance(value, float):
             value = f"{value:.4g}"
         if not isinstance(value, list | dict):
             lines.append(f"{key}: {value}")
-    Output(json_out, quiet).emit(Summary(summary, lines=lines))
+    output, result = Output(json_out, quiet), Summary(summary, lines=lines)
+    if report is not None:
+        add_report(output, result, *report)
+    output.emit(result)
 
 
 def train(
@@ -73,11 +80,12 @@ def evaluate(
         ),
     ] = "label",
     device: DeviceOption = None,
+    no_report: NoReportOption = False,
     json_out: JsonOption = False,
     quiet: QuietOption = False,
 ) -> None:
     """Evaluate a trained run on a store (--store) or on captures (--captures); the metrics
-    go to RUN/evaluations/*.json."""
+    go to RUN/evaluations/*.json and the run's report to RUN/report.html."""
     from virtus.errors import InputError
     from virtus.learn import evaluate as evaluate_store
     from virtus.learn import evaluate_captures
@@ -88,7 +96,7 @@ def evaluate(
         summary = evaluate_store(run, store, split, device=device, unwrap=unwrap)
     else:
         summary = evaluate_captures(run, list(captures or []), device=device)
-    _emit(summary, json_out, quiet)
+    _emit(summary, json_out, quiet, (run, no_report))
 
 
 def register(app: typer.Typer) -> None:

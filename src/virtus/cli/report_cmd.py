@@ -1,7 +1,8 @@
 """``virtus report RUN_DIR``: one self-contained HTML page for the directory of any run.
 
-Also the ``--no-report`` option and the call with which ``demo``, ``scan``, ``calibrate`` and
-``ablation`` write ``OUT/report.html`` after their run (:func:`add_report`).
+Also the ``--no-report`` option and the call with which ``demo``, ``scan``, ``calibrate``,
+``ablation``, ``acceptance``, ``robot-scan`` and ``learn eval`` write ``OUT/report.html`` after
+their run (:func:`add_report`).
 """
 
 from __future__ import annotations
@@ -49,8 +50,8 @@ def register(app: typer.Typer) -> None:
         run_dir: Annotated[
             Path,
             typer.Argument(
-                help="Directory of a run (demo, calibrate, capture, scan, "
-                "ablation, twin) or a dataset store."
+                help="Directory of a run (demo, calibrate, capture, scan, ablation, twin, "
+                "acceptance, predict, design, robot-scan, learn train) or a dataset store."
             ),  # fmt: skip
         ],
         out: Annotated[

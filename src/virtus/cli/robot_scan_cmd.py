@@ -9,6 +9,7 @@ import typer
 
 from virtus.cli.options import OverwriteOption, ScannerOptions, SeedOption, scanner_options
 from virtus.cli.output import JsonOption, Output, QuietOption, Summary
+from virtus.cli.report_cmd import NoReportOption, add_report
 
 PackagePathOption = Annotated[
     list[str] | None,
@@ -56,6 +57,7 @@ def robot_scan(
     resume: Annotated[
         bool, typer.Option("--resume", help="Continue an interrupted run (same settings).")
     ] = False,
+    no_report: NoReportOption = False,
     json_out: JsonOption = False,
     quiet: QuietOption = False,
 ) -> None:
@@ -104,7 +106,9 @@ def robot_scan(
     summary.add(
         "record", str(Path(out) / "robot_scan.json"), f"wrote {Path(out) / 'robot_scan.json'}"
     )
-    Output(json_out, quiet).emit(summary)
+    output = Output(json_out, quiet)
+    add_report(output, summary, Path(out), no_report)
+    output.emit(summary)
 
 
 def _brief(evaluation: dict) -> dict:

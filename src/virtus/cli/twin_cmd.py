@@ -135,12 +135,7 @@ def register(app: typer.Typer) -> None:
         With --validate, re-render every captured pose with the twin and write
         OUT/validation.json."""
         from virtus.errors import InputError
-        from virtus.pipeline.twin import (
-            VALIDATION_FILE,
-            check_validation,
-            validate_twin,
-            write_twin,
-        )
+        from virtus.pipeline.twin import VALIDATION_FILE, check_validation, run_twin
 
         board = once(board, "--board")
         extra = list(more_captures or [])
@@ -162,25 +157,17 @@ def register(app: typer.Typer) -> None:
         if pixel_size_um is not None and not 0 < pixel_size_um < 1000:  # NaN fails too
             raise InputError("--pixel-size-um", "a pixel pitch in (0, 1000) um", pixel_size_um)
         pitch = {} if pixel_size_um is None else {"pixel_size_m": pixel_size_um * 1e-6}
-        written = write_twin(
-            calibration, out, meters_per_unit=meters_per_unit, units=unit, fit=fits or None,
+        written, result = run_twin(
+            calibration, out, validate=validated or None, board=board, spp=spp,
+            meters_per_unit=meters_per_unit, units=unit, fit=fits or None,
             albedo=albedo, sensor=sensor, projector=projector,
             camera_size=parse_size(camera_size),
             projector_size=parse_size(projector_size, "--projector-size"), **pitch,
         )  # fmt: skip
         data: dict[str, Any] = {"written": dict(written), "validation": None}
-        if not validate:
+        if result is None:
             output.emit(Summary(data, _print_twin))
             return
-        result = validate_twin(
-            calibration,
-            validated,
-            board=board,
-            spp=spp,
-            out=out / VALIDATION_FILE,
-            units=unit,
-            twin=out if fits else None,
-        )
         data["validation"] = {
             "per_pose": list(result.per_pose),
             "overall": dict(result.overall),

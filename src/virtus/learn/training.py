@@ -9,7 +9,8 @@ A run directory (owned by one run at a time, :func:`virtus.io.runs.claim_run`)::
                       and at each epoch's end
     history.json      per epoch: train loss, validation loss, learning rate
     metrics.json      :mod:`virtus.learn.metrics` of the final model on the store's test
-                      split (``virtus learn eval`` adds ``evaluations/<name>.json``)
+                      split (``virtus learn eval`` adds ``evaluations/<name>.json``
+                      and the depth maps of its first samples, ``evaluations/<name>/``)
 
 Determinism: the weights are initialised from ``seed``, the batches of epoch ``e`` are the
 permutation ``default_rng([seed, e])`` of the training samples, and nothing else draws
@@ -39,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from virtus.errors import InputError
-from virtus.io.runs import claim_run, write_json_atomic
+from virtus.io.runs import atomic_write, claim_run, file_digest, write_json_atomic
 from virtus.learn._torch import require_torch
 from virtus.learn.config import TrainConfig
 from virtus.learn.dataset import LearnDataset
@@ -54,6 +55,10 @@ torch = require_torch()
 CHECKPOINT = "checkpoint.pt"
 CHECKPOINT_FORMAT = "virtus.learn_checkpoint/1"
 _LAYOUT = ("config.json", CHECKPOINT, "history.json", "metrics.json")
+#: ``evaluate`` saves the depth maps of this many first samples (for the run's report),
+#: each ``evaluations/<name>/sample_NNNNNN.npy``, (3, H, W) float32 mm, layers in order:
+MAP_SAMPLES = 3
+MAP_LAYERS = ("predicted_depth", "true_depth", "error")
 
 
 def _architecture(config: TrainConfig) -> dict[str, Any]:
@@ -96,13 +101,20 @@ class _Runner:
         return self.layers[key], period
 
     def phase_depth(self, dataset: LearnDataset, items: list[int], absolute: Any) -> Any:
-        """Depth (m, float32) of absolute phases ``(B, H, W)`` with each sample's layer."""
+        """Depth (m, float32) of absolute phases ``(B, H, W)`` with each sample's layer
+        (samples sharing a rig and period go through their layer together: one call)."""
         from virtus.learn.triangulate import phase_to_coordinate
 
-        out = []
+        groups: dict[tuple[int, float], tuple[Any, float, list[int]]] = {}
         for b, item in enumerate(items):
             layer, period = self._layer(dataset, item)
-            out.append(layer.depth(phase_to_coordinate(absolute[b].double(), period)).float())
+            groups.setdefault((id(layer), period), (layer, period, []))[2].append(b)
+        out: list[Any] = [None] * len(items)
+        for layer, period, members in groups.values():
+            index = torch.tensor(members, device=absolute.device)
+            depth = layer.depth(phase_to_coordinate(absolute[index].double(), period)).float()
+            for j, b in enumerate(members):
+                out[b] = depth[j]
         return torch.stack(out)
 
     def loss(self, dataset: LearnDataset, items: list[int], batch: dict[str, Any]) -> Any:
@@ -157,12 +169,19 @@ class _Runner:
         }
 
 
-def _evaluate_set(runner: _Runner, dataset: LearnDataset) -> dict[str, Any]:
+def _evaluate_set(
+    runner: _Runner, dataset: LearnDataset, maps: list[tuple[int, np.ndarray]] | None = None
+) -> dict[str, Any]:
+    """Metrics of the model over ``dataset``; with ``maps``, the first :data:`MAP_SAMPLES`
+    samples' ``(index, (3, H, W) float32 [predicted, true, predicted - true] depth, mm)``
+    are appended to it (NaN: no surface or no prediction)."""
     runner.model.eval()
     sums = MetricSums()
     for item in range(len(dataset)):
         sample = dataset[item]
         pred = runner.predict(dataset, item, sample)
+        if maps is not None and item < MAP_SAMPLES:
+            maps.append((int(sample["index"]), _depth_maps(pred["depth"], sample)))
         layer, _ = dataset.layer(item)
         extra: dict[str, Any] = {"rays": layer.rays.cpu().numpy()}
         if "wrapped" in pred:
@@ -183,6 +202,14 @@ def _evaluate_set(runner: _Runner, dataset: LearnDataset) -> dict[str, Any]:
             )
         )
     return sums.summary()
+
+
+def _depth_maps(predicted_m: np.ndarray, sample: dict[str, Any]) -> np.ndarray:
+    """``(3, H, W)`` float32 mm: predicted, true and error depth on the surface pixels."""
+    surface = sample["surface"].numpy().astype(bool)
+    true = np.where(surface, sample["depth"].numpy().astype(np.float64), np.nan)
+    pred = np.where(surface, np.asarray(predicted_m, dtype=np.float64), np.nan)
+    return (np.stack([pred, true, pred - true]) * 1e3).astype(np.float32)
 
 
 def _batches(n: int, config: TrainConfig, epoch: int) -> list[list[int]]:
@@ -250,15 +277,14 @@ def train(
     to kill a run at a chosen step). ``resume`` continues from ``checkpoint.pt``.
     """
     store = Path(store)
-    train_set = LearnDataset(store, "train", config.model, config.input_frame)
+    c = config
+    train_set = LearnDataset(store, "train", c.model, c.input_frame, c.direction)
     if len(train_set) == 0:
         raise InputError("store", "a store with samples in its train split", "none")
     splits = train_set.base.splits
-    val_set = (
-        LearnDataset(store, "val", config.model, config.input_frame) if "val" in splits else None
-    )
-    test_set = (
-        LearnDataset(store, "test", config.model, config.input_frame) if "test" in splits else None
+    val_set, test_set = (
+        LearnDataset(store, split, c.model, c.input_frame, c.direction) if split in splits else None
+        for split in ("val", "test")
     )
     dev = _device(device)
     setting = {"train": config.to_dict(), "store": str(store.resolve())}
@@ -430,17 +456,33 @@ def evaluate(
     if unwrap not in ("label", "decode"):
         raise InputError("unwrap", "'label' or 'decode'", unwrap)
     config, model = load_model(run_dir, device)
-    dataset = LearnDataset(store, split, config.model, config.input_frame)
+    dataset = LearnDataset(store, split, config.model, config.input_frame, config.direction)
     runner = _Runner(config, model, next(model.parameters()).device)
     runner.unwrap = unwrap
+    maps: list[tuple[int, np.ndarray]] = []
     summary = {
         "store": str(Path(store).resolve()),
         "split": split,
         "unwrap": unwrap,
-        **_evaluate_set(runner, dataset),
+        **_evaluate_set(runner, dataset, maps),
     }
     label = name or f"{Path(store).name}-{split or 'all'}" + (
         "-decode" if unwrap == "decode" else ""
     )
+    summary["maps"] = _write_maps(Path(run_dir) / "evaluations", label, maps)
     write_json_atomic(Path(run_dir) / "evaluations" / f"{label}.json", summary)
     return summary
+
+
+def _write_maps(folder: Path, label: str, maps: list[tuple[int, np.ndarray]]) -> list[dict]:
+    """Save each ``(index, maps)`` as ``folder/label/sample_NNNNNN.npy`` (written atomically);
+    the entries (file relative to ``folder``, sample index, sha256) for the summary."""
+    entries = []
+    for index, values in maps:
+        relative = f"{label}/sample_{index:06d}.npy"
+        target = folder / relative
+        target.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write(target, lambda tmp, v=values: np.save(tmp, v))
+        entries.append({"file": relative, "sample": index, "sha256": file_digest(target),
+                        "layers": list(MAP_LAYERS), "unit": "mm"})  # fmt: skip
+    return entries

@@ -33,6 +33,18 @@ in px):
 * ``point_noise_real_mm``, ``point_noise_twin_mm``, ``point_noise_ratio``: RMS distance of
   each cloud to its own fitted plane (the board is flat: the point noise), and real / twin.
 
+With ``out``, the per-pose **difference maps** go beside the table:
+``validation_maps/pose_NNN.npy``, ``(4, h, w)`` float32, the layers of :data:`MAP_LAYERS`
+(normalised white, first fringe and first code frame, real minus virtual, each frame
+divided by its capture's mean white frame on the compared pixels; the distance between the
+two decoded projector coordinates, projector px), NaN off the compared pixels, averaged
+over ``bin x bin`` camera pixels so the longer side is at most :data:`MAP_MAX_SIDE`;
+``validation.json`` lists each file with its SHA-256 under ``maps``.
+
+:func:`run_twin` is the whole ``virtus twin`` job in an owned run directory
+(:func:`virtus.io.runs.claim_run`, command ``twin``): ``run.json`` says ``running`` until the
+twin (and its validation) are written, so a half-finished twin is known as such.
+
 :func:`write_photometry` is ``virtus twin CALIB --fit CAPTURES...``: the twin's light,
 fitted to real captures (phase shifts with white and black frames, e.g. of a matte plane at
 several distances) by :func:`virtus.twin.photometric.fit_photometry`: ``DIR/sensor.yaml``
@@ -44,6 +56,7 @@ them (and the ambient level).
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -65,7 +78,7 @@ from virtus.errors import InputError, VirtusError
 from virtus.geometry.devices import Rig
 from virtus.geometry.transforms import Pose
 from virtus.io.jsonio import write_json
-from virtus.io.runs import atomic_write
+from virtus.io.runs import atomic_write, claim_run, file_digest
 from virtus.io.safeio import read_json
 from virtus.metrology.plane import fit_plane
 from virtus.reconstruct import points_from_decoded
@@ -86,6 +99,10 @@ __all__ = [
     "VALIDATION_FILE",
     "TwinValidation",
     "compare_captures",
+    "MAP_LAYERS",
+    "MAPS_DIR",
+    "TWIN_COMMAND",
+    "run_twin",
     "load_photometry",
     "check_validation",
     "stereo_board_pose",
@@ -108,6 +125,18 @@ RIG_FILE, ISAAC_FILE, USD_FILE, VALIDATION_FILE = (
 )
 #: Files written by :func:`write_photometry` (``virtus twin --fit``).
 SENSOR_FILE, PROJECTOR_FILE, PHOTOMETRY_FILE = "sensor.yaml", "projector.yaml", "photometric.json"
+#: Folder of the per-pose difference maps (beside ``validation.json``) and their layers.
+MAPS_DIR = "validation_maps"
+MAP_LAYERS = ("white", "fringe", "code", "proj_uv")
+#: Longest side (px) of a stored difference map: larger captures are binned to it
+#: (a 1920 x 1200 capture gives 480 x 300 maps, 2.3 MB a pose).
+MAP_MAX_SIDE = 480
+#: The run record's command and the files a twin run owns (:func:`run_twin`).
+TWIN_COMMAND = "twin"
+TWIN_LAYOUT = (RIG_FILE, ISAAC_FILE, USD_FILE, "twin_projector.png", VALIDATION_FILE,
+               SENSOR_FILE, PROJECTOR_FILE, PHOTOMETRY_FILE, f"{MAPS_DIR}/*.npy")  # fmt: skip
+#: (the USD stage's projector texture, written by :func:`virtus.twin.usd.export_usd` beside
+#: ``twin.usda``)
 
 
 def write_twin(
@@ -234,15 +263,20 @@ class TwinValidation:
     per_pose: list[dict[str, Any]]
     overall: dict[str, float]
     dropped: dict[str, str] = field(default_factory=dict)
+    maps: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: units, per pose, overall, dropped poses."""
-        return {
+        """JSON-ready: units, per pose, overall, dropped poses (and the difference maps'
+        files, when they were saved)."""
+        data = {
             "units": {"centre": "px", "proj_uv": "projector px", "cloud": "mm"},
             "per_pose": self.per_pose,
             "overall": self.overall,
             "dropped": self.dropped,
         }
+        if self.maps:
+            data["maps"] = self.maps
+        return data
 
 
 def _board_poses(calibration: str | Path) -> tuple[dict[str, Pose], dict[str, Any] | None]:
@@ -372,10 +406,59 @@ def _check_board(board: Board, recorded: Any, spec: Any, items: list[Any]) -> No
         )
 
 
+def _binned(values: np.ndarray, factor: int) -> np.ndarray:
+    """``(L, H, W)`` averaged over ``factor x factor`` blocks (NaN ignored; a block of NaN
+    only stays NaN), float32."""
+    if factor == 1:
+        return values.astype(np.float32)
+    layers, height, width = values.shape
+    h, w = -(-height // factor), -(-width // factor)
+    padded = np.full((layers, h * factor, w * factor), np.nan)
+    padded[:, :height, :width] = values
+    blocks = padded.reshape(layers, h, factor, w, factor)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN blocks stay NaN, silently
+        return np.nanmean(blocks, axis=(2, 4)).astype(np.float32)
+
+
+def difference_maps(
+    real: Capture, virtual: Capture, mask: np.ndarray, proj_distance: np.ndarray
+) -> tuple[np.ndarray, int]:
+    """The per-pose difference maps (module docstring): ``(4, h, w)`` float32 in the order
+    of :data:`MAP_LAYERS`, and the binning factor. ``mask``: (H, W) bool, the compared
+    pixels; ``proj_distance``: (H, W) projector px, the decoded-coordinate distance."""
+    kinds = [frame.kind for frame in real.sequence.frames]
+    height, width = mask.shape
+    maps = np.full((len(MAP_LAYERS), height, width), np.nan)
+    if "white" in kinds and np.any(mask):
+        white = kinds.index("white")
+        scale_real = float(real.frames[white][mask].mean())
+        scale_twin = float(virtual.frames[white][mask].mean())
+        codes = ("gray", "binary", "gray_complement", "binary_complement")
+        firsts = (white, next((i for i, k in enumerate(kinds) if k == "phase"), None),
+                  next((i for i, k in enumerate(kinds) if k in codes), None))  # fmt: skip
+        for layer, index in enumerate(firsts):
+            if index is None:
+                continue
+            a = real.frames[index].astype(np.float64) / scale_real
+            b = virtual.frames[index].astype(np.float64) / scale_twin
+            maps[layer][mask] = (a - b)[mask]
+    maps[3][mask] = proj_distance[mask]
+    factor = max(1, -(-max(height, width) // MAP_MAX_SIDE))
+    return _binned(maps, factor), factor
+
+
 def compare_captures(
-    rig: Rig, board: Board, board2cam: Pose, real: Capture, virtual: Capture, name: str
+    rig: Rig,
+    board: Board,
+    board2cam: Pose,
+    real: Capture,
+    virtual: Capture,
+    name: str,
+    maps: list[tuple[np.ndarray, int]] | None = None,
 ) -> dict[str, Any]:
-    """Differences between a real capture and its twin render (module docstring)."""
+    """Differences between a real capture and its twin render (module docstring); with
+    ``maps`` (a list), the pose's :func:`difference_maps` are appended to it."""
     from scipy.spatial import cKDTree
 
     obs_real, obs_virtual = observe_pose(real, board, name), observe_pose(virtual, board, name)
@@ -392,6 +475,10 @@ def compare_captures(
     row["proj_uv_rms_px"] = float(np.sqrt(np.mean(distance_uv**2)))
     row["proj_uv_median_px"] = float(np.median(distance_uv))
     row["pixels"] = int(both.sum())
+    if maps is not None:
+        distance_map = np.full(both.shape, np.nan)
+        distance_map[both] = distance_uv
+        maps.append(difference_maps(real, virtual, both, distance_map))
     cloud_real = points_from_decoded(rig, dec_real.proj_uv, both)[both]
     cloud_virtual = points_from_decoded(rig, dec_virtual.proj_uv, both)[both]
     cloud_real = cloud_real[np.isfinite(cloud_real).all(axis=1)]
@@ -464,7 +551,8 @@ def validate_twin(
     captures : the real calibration captures (directories, folders of them, or captures).
     board : the board (default: the calibration file's).
     spp : supersamples of the twin renders.
-    out : if given, the table is written there as JSON.
+    out : if given, the table is written there as JSON, and each pose's difference maps
+        beside it (``<folder of out>/validation_maps/pose_NNN.npy``, module docstring).
     twin : the twin's fitted light (a twin directory, :func:`load_photometry`, or a fit):
         its camera, projector and ambient level render the poses; without it the captures'
         own sensor (or an ideal one) and an ideal projector do.
@@ -483,6 +571,7 @@ def validate_twin(
     texture = board_texture(the_board)
     per_pose: list[dict[str, Any]] = []
     dropped: dict[str, str] = {}
+    map_files: dict[str, Any] = {}
     for index, item in enumerate(items):
         real = item if isinstance(item, Capture) else Capture.load(item)
         name = real.path.name if real.path is not None else f"pose_{index + 1:03d}"
@@ -518,14 +607,102 @@ def validate_twin(
         if light is not None and light.ambient > 0:
             scene = Scene(objects=scene.objects, ambient=light.ambient)
         virtual = scanner.capture(scene)
-        row = compare_captures(rig, the_board, board2cam, real, virtual, name)
+        pose_maps: list[tuple[np.ndarray, int]] | None = None if out is None else []
+        row = compare_captures(rig, the_board, board2cam, real, virtual, name, pose_maps)
         per_pose.append({**row, **posed})
+        if out is not None and pose_maps:
+            _save_maps(Path(out).parent, f"pose_{index + 1:03d}.npy", name, pose_maps[0],
+                       map_files)  # fmt: skip
     if not per_pose:
         raise VirtusError("twin validation: no pose could be compared" + f" ({dropped})")
-    result = TwinValidation(per_pose, _overall(per_pose), dropped)
+    result = TwinValidation(per_pose, _overall(per_pose), dropped, map_files)
     if out is not None:
         write_json(Path(out), result.to_dict())
     return result
+
+
+def _save_maps(
+    folder: Path, file: str, name: str, pose_maps: tuple[np.ndarray, int], maps: dict[str, Any]
+) -> None:
+    """Write one pose's maps to ``folder/MAPS_DIR/file`` and list it in ``maps``."""
+    values, factor = pose_maps
+    target = folder / MAPS_DIR / file
+    target.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write(target, lambda tmp: np.save(tmp, values))
+    if not maps:
+        maps.update(layers=list(MAP_LAYERS), bin=factor, files={},
+                    units={"white": "share of the mean white level", "fringe": "same",
+                           "code": "same", "proj_uv": "projector px"})  # fmt: skip
+    maps["files"][name] = {"file": f"{MAPS_DIR}/{file}", "sha256": file_digest(target),
+                           "shape": list(values.shape), "bin": factor}  # fmt: skip
+
+
+def run_twin(
+    calibration: str | Path,
+    out_dir: str | Path,
+    *,
+    validate: list[str | Path] | None = None,
+    board: str | None = None,
+    spp: int = 1,
+    **twin_options: Any,
+) -> tuple[dict[str, Path], TwinValidation | None]:
+    """``virtus twin``: :func:`write_twin` (``twin_options`` are its keywords) and, with
+    ``validate`` (capture directories), :func:`validate_twin` into ``out_dir`` (with the
+    fitted light when ``twin_options`` has ``fit``), in a run directory owned through
+    :func:`virtus.io.runs.claim_run` (command ``twin``): ``run.json`` says ``running`` while
+    the job runs, ``complete`` or ``failed`` after, and lists the files written. A new twin
+    replaces an earlier twin's files in ``out_dir``; a directory that holds another
+    command's run is refused. The calibration is read before anything is written.
+
+    Raises
+    ------
+    InputError : a calibration that cannot be read, a bad ``pixel_size_m``.
+    VirtusError : ``out_dir`` holds another command's run, or is locked by another run.
+    """
+    from virtus.errors import RunConflict
+    from virtus.io.runs import RUN_FILE
+
+    positive("pixel_size_m", twin_options.get("pixel_size_m", DEFAULT_PIXEL_SIZE_M))
+    sizes = {k: twin_options.get(k) for k in ("units", "camera_size", "projector_size")}
+    load_calibration(calibration, **sizes)  # refused before anything is written
+    out = Path(out_dir)
+    if (out / RUN_FILE).is_file():
+        old = read_json(out / RUN_FILE, "run record", expect=dict)
+        if old.get("command") != TWIN_COMMAND:
+            raise RunConflict(f"{out} holds a `virtus {old.get('command')}` run; choose "
+                              "another output directory for the twin")  # fmt: skip
+    config = {
+        "calibration": str(calibration),
+        "validate": [str(p) for p in validate or []],
+        "board": board,
+        "spp": spp,
+        **{k: _plain(v) for k, v in twin_options.items()},
+    }
+    inputs = {"calibration": calibration} if Path(calibration).is_file() else {}
+    result = None
+    with claim_run(out, TWIN_COMMAND, config, inputs=inputs, layout=TWIN_LAYOUT,
+                   overwrite=True) as run:  # fmt: skip
+        try:
+            written = write_twin(calibration, out, **twin_options)
+            if validate:
+                result = validate_twin(
+                    calibration, list(validate), board=board, spp=spp,
+                    out=out / VALIDATION_FILE, units=twin_options.get("units"),
+                    twin=out if twin_options.get("fit") else None,
+                )  # fmt: skip
+        finally:  # the files written so far, also of a failed run (an overwrite removes them)
+            run.own(*(p.relative_to(out).as_posix() for pattern in TWIN_LAYOUT
+                      for p in sorted(out.glob(pattern)) if p.is_file()))  # fmt: skip
+    return written, result
+
+
+def _plain(value: Any) -> Any:
+    """A twin option as JSON data for the run record (paths and models as text)."""
+    if value is None or isinstance(value, bool | int | float | str):
+        return value
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    return str(value)
 
 
 def _overall(per_pose: list[dict[str, Any]]) -> dict[str, float]:

@@ -15,7 +15,10 @@ leaves nothing behind. What each kind shows:
   C2M (Fig. 6c) when evaluated, the 3D view (coloured by C2M distance when evaluated, else
   by depth);
 * ``turntable``: merged-cloud C2M and 3D view; ``ablation``, ``twin``, ``dataset``:
-  :mod:`virtus.report.others`.
+  :mod:`virtus.report.others`;
+* ``acceptance``, ``predict``, ``design``: :mod:`virtus.report.design`; ``robot-scan``:
+  :mod:`virtus.report.robot`; ``learn`` (train, and the evaluations in it):
+  :mod:`virtus.report.learn`.
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from virtus.report import others, scan
+from virtus.report import design, learn, others, robot, scan
 from virtus.report.calibration import add_calibration
 from virtus.report.html import Page
 from virtus.report.runs import RunInfo, check_run, read_run_json
@@ -254,6 +257,26 @@ def _dataset(page: Page, info: RunInfo) -> None:
     others.add_dataset(page, info.path)
 
 
+def _acceptance(page: Page, info: RunInfo) -> None:
+    design.add_acceptance(page, info.path)
+
+
+def _predict(page: Page, info: RunInfo) -> None:
+    design.add_predict(page, info.path, info.record)
+
+
+def _design(page: Page, info: RunInfo) -> None:
+    design.add_design(page, info.path)
+
+
+def _robot_scan(page: Page, info: RunInfo) -> None:
+    robot.add_robot_scan(page, info.path)
+
+
+def _learn(page: Page, info: RunInfo) -> None:
+    learn.add_learn(page, info.path)
+
+
 _BUILDERS = {
     "demo": _demo,
     "calibrate": _calibrate,
@@ -263,6 +286,11 @@ _BUILDERS = {
     "ablation": _ablation,
     "twin": _twin,
     "dataset": _dataset,
+    "acceptance": _acceptance,
+    "predict": _predict,
+    "design": _design,
+    "robot-scan": _robot_scan,
+    "learn": _learn,
 }
 
 _TITLES = {
@@ -274,6 +302,11 @@ _TITLES = {
     "ablation": "virtus ablation",
     "twin": "virtus twin",
     "dataset": "virtus dataset",
+    "acceptance": "virtus acceptance: a virtual VDI/VDE 2634-2 test",
+    "predict": "virtus predict: the scanner's predicted noise",
+    "design": "virtus design: a sweep of scanner designs",
+    "robot-scan": "virtus robot-scan",
+    "learn": "virtus learn: a trained fringe-analysis network",
 }
 
 

@@ -50,8 +50,11 @@ QUANTITIES: dict[str, Quantity] = {
     "modulation": Quantity("modulation B (DN)", "magma"),
     "depth": Quantity("depth z (mm)", "turbo"),
     "signed_error": Quantity("signed error (mm)", "RdBu_r", symmetric=True),
-    "difference": Quantity("difference (twin − real)", "RdBu_r", symmetric=True),
+    "difference": Quantity("difference (real − twin)", "RdBu_r", symmetric=True),
+    "proj_distance": Quantity("distance (proj. px)", "inferno"),
     "proj_u": Quantity("projector column u_p (proj. px)", "viridis"),
+    "sigma_px": Quantity("predicted σ (proj. px)", "YlOrBr"),
+    "sigma_um": Quantity("predicted σ (µm)", "cividis"),
 }
 
 #: Figure width (inches) and resolution: 6.4 in at 80 dpi = 512 px wide.

@@ -1,6 +1,7 @@
 """Report sections of the runs that are tables of experiments or collections: an ablation
 (its heat map, one bar chart per metric, the table), a twin validation (per-pose
-differences between the real captures and their re-rendering) and a dataset store (a
+differences between the real captures and their re-rendering, as numbers and as the
+difference maps the validation stored) and a dataset store (a
 gallery of a few samples with their labels).
 """
 
@@ -15,7 +16,14 @@ import numpy as np
 from virtus.report import figures
 from virtus.report.html import Page
 
-__all__ = ["GALLERY_SAMPLES", "add_ablation", "add_dataset", "add_twin"]
+__all__ = [
+    "GALLERY_SAMPLES",
+    "TWIN_MAP_POSES",
+    "add_ablation",
+    "add_dataset",
+    "add_twin",
+    "add_twin_maps",
+]
 
 #: Samples shown in a dataset store's gallery.
 GALLERY_SAMPLES = 4
@@ -93,11 +101,54 @@ def add_twin(page: Page, path: Path) -> dict[str, Any] | None:
     if poses:
         header = list(poses[0])
         section.grid("per pose", header, [[p.get(k) for k in header] for p in poses])
-    section.note(
-        "Difference maps per pose are not stored by `virtus twin --validate` (only these "
-        "per-pose numbers), so the report shows the numbers."
-    )
+    add_twin_maps(page, path, data.get("maps"))
     return data
+
+
+#: Poses whose difference maps a twin report draws (the first ones; the rest are listed).
+TWIN_MAP_POSES = 6
+#: How each layer of a twin difference map is drawn: (quantity, title).
+_TWIN_LAYERS = {
+    "white": ("difference", "white frame, real − twin (share of white)"),
+    "fringe": ("difference", "first fringe frame, real − twin (share of white)"),
+    "code": ("difference", "first code frame, real − twin (share of white)"),
+    "proj_uv": ("proj_distance", "|decoded (u_p, v_p) real − twin| (proj. px)"),
+}
+
+
+def add_twin_maps(page: Page, path: Path, maps: Any) -> None:
+    """The per-pose difference maps ``validation.json`` lists (``maps``), each checked
+    against its checksum; a twin validated before the maps were stored gets a note."""
+    from virtus.io.runs import file_digest
+    from virtus.io.safeio import load_npy
+    from virtus.report.runs import NotReportable
+
+    section = page.section("Twin validation: difference maps per pose", "twin-maps")
+    if not isinstance(maps, dict) or not isinstance(maps.get("files"), dict):
+        section.note("This validation stored no difference maps (written by an older "
+                     "virtus): the per-pose numbers above are all there is.")  # fmt: skip
+        return
+    layers = [str(name) for name in maps.get("layers", [])]
+    entries = list(maps["files"].items())
+    section.note(f"Each map averaged over {maps.get('bin')} x {maps.get('bin')} camera pixels; "
+                 "grey: pixels not compared (off the board or not decoded in both).")  # fmt: skip
+    root = path.resolve()
+    for index, (name, entry) in enumerate(entries[:TWIN_MAP_POSES]):
+        file = path / str(entry.get("file") if isinstance(entry, dict) else "")
+        if not file.resolve().is_relative_to(root) or not file.is_file():
+            raise NotReportable(file, "a difference map validation.json lists is missing")
+        if file_digest(file) != entry.get("sha256"):
+            raise NotReportable(file, "changed since the validation wrote it (checksum)")
+        values = load_npy(file, "twin difference maps", dtype=np.float32,
+                          shape=(len(layers), None, None))  # fmt: skip
+        for layer, key in enumerate(layers):
+            quantity, title = _TWIN_LAYERS.get(key, ("difference", key))
+            section.figure(f"pose-{index}-{key}",
+                           figures.image_map(values[layer], quantity, f"{name}: {title}"),
+                           f"Pose {name}: {title}.")  # fmt: skip
+    if len(entries) > TWIN_MAP_POSES:
+        section.note("Maps not drawn here (in validation_maps/): "
+                     + ", ".join(str(n) for n, _ in entries[TWIN_MAP_POSES:]))  # fmt: skip
 
 
 def add_dataset(page: Page, path: Path) -> dict[str, Any]:

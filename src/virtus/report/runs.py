@@ -12,9 +12,16 @@ kind            recognised by
 ``scan``        command ``scan`` (capture + ``decoded/`` + ``points.ply``, perhaps evaluated)
 ``turntable``   command ``turntable`` (``turntable.json``, ``merged.ply``, ``view_*/``)
 ``ablation``    command ``ablation`` (``ablation.json``)
-``twin``        ``twin.usda`` + ``isaac.json`` (``virtus twin``; ``validation.json`` with
-                ``--validate``); the twin job keeps no ``run.json``
+``twin``        command ``twin`` (``rig.json``, ``isaac.json``, ``twin.usda`` with usd-core;
+                ``validation.json`` and ``validation_maps/`` with ``--validate``); a twin
+                written before twins kept a ``run.json``: ``twin.usda`` + ``isaac.json``
 ``dataset``     ``dataset.json`` (a dataset store)
+``acceptance``  command ``acceptance`` (``acceptance.json``, ``acceptance.csv``)
+``predict``     command ``predict`` (``summary.json``, the sigma maps, ``mask.npy``)
+``design``      command ``design`` (``design.json``, ``design.csv``, ``figures/``)
+``robot-scan``  command ``robot-scan`` (``robot_scan.json``, ``merged.ply``, ``views/*``)
+``learn``       command ``learn train`` (``metrics.json``, ``history.json``; the
+                ``evaluations/`` that ``virtus learn eval`` adds)
 ==============  =========================================================================
 
 Refused, each with one line naming the problem (:class:`virtus.errors.InputError`):
@@ -48,14 +55,35 @@ __all__ = [
 ]
 
 #: Run kinds a report can be made of.
-KINDS = ("demo", "calibrate", "capture", "scan", "turntable", "ablation", "twin", "dataset")
+KINDS = (
+    "demo",
+    "calibrate",
+    "capture",
+    "scan",
+    "turntable",
+    "ablation",
+    "twin",
+    "dataset",
+    "acceptance",
+    "predict",
+    "design",
+    "robot-scan",
+    "learn",
+)
 
 
 def _commands() -> dict[str, str]:
     """``run.json`` command -> kind (the names as each job spells them)."""
-    from virtus.pipeline import ablation, calibrate, capture, demo, scan, turntable
+    from virtus.design import acceptance, predict, sweep
+    from virtus.pipeline import ablation, calibrate, capture, demo, scan, turntable, twin
+    from virtus.robot import scan as robot_scan
 
     return {
+        acceptance.COMMAND: "acceptance",
+        predict.COMMAND: "predict",
+        sweep.COMMAND: "design",
+        robot_scan.COMMAND: "robot-scan",
+        "learn train": "learn",  # virtus.learn.training's (not imported here: it needs torch)
         demo.COMMAND: "demo",
         calibrate.COMMAND: "calibrate",
         calibrate.CAPTURES_COMMAND: "calibrate",
@@ -65,6 +93,7 @@ def _commands() -> dict[str, str]:
         scan.COMMAND: "scan",
         turntable.COMMAND: "turntable",
         ablation.COMMAND: "ablation",
+        twin.TWIN_COMMAND: "twin",
     }
 
 
@@ -76,8 +105,13 @@ _REQUIRED = {
     "scan": ("capture.json", "points.ply"),
     "turntable": ("turntable.json", "merged.ply"),
     "ablation": ("ablation.json",),
-    "twin": ("twin.usda", "isaac.json", "rig.json"),
+    "twin": ("isaac.json", "rig.json"),
     "dataset": ("dataset.json",),
+    "acceptance": ("acceptance.json", "acceptance.csv"),
+    "predict": ("summary.json", "mask.npy"),
+    "design": ("design.json", "design.csv"),
+    "robot-scan": ("robot_scan.json", "merged.ply", "trajectory.json"),
+    "learn": ("metrics.json", "history.json", "config.json"),
 }
 
 
@@ -172,6 +206,8 @@ def check_run(path: str | Path) -> RunInfo:
         check_arrays(path / "scan", ("sphere_radial_error.npy",))
     if kind == "dataset":
         _check_store(path)
+    if kind == "robot-scan":
+        _check_views(path)
     return RunInfo(path, kind, command, record)
 
 
@@ -180,9 +216,11 @@ def _check_listed(path: Path, kind: str, record: dict[str, Any]) -> None:
     before they are made (decode, reconstruct, evaluate come later, if ever)."""
     from virtus.capture.scandir import DERIVED_FILES
 
+    depth = {"demo": 1, "turntable": 1, "robot-scan": 2}.get(kind, 0)
     for name in record.get("files", []):
-        inner = name.split("/", 1)[-1]  # a demo's scan/..., a turntable's view_N/...
-        if name in DERIVED_FILES or (kind in ("demo", "turntable") and inner in DERIVED_FILES):
+        # a demo's scan/..., a turntable's view_N/..., a robot scan's views/NNN/...
+        inner = name.split("/", depth)[-1]
+        if name in DERIVED_FILES or inner in DERIVED_FILES:
             continue
         if not (path / name).is_file():
             raise NotReportable(path / name, "missing, though the run's record lists it "
@@ -268,3 +306,16 @@ def _check_store(path: Path) -> None:
             path, f"a half-finished dataset store ({done} of {store.num_samples} samples); "
             "finish it with `virtus dataset generate` first",
         )  # fmt: skip
+
+
+def _check_views(path: Path) -> None:
+    """Each view of a robot scan is a whole capture directory whose derived files still
+    belong to its frames."""
+    from virtus.report.robot import RESULT_JSON, view_dirs
+
+    data = read_run_json(path, RESULT_JSON, "robot scan summary", ("views",))
+    for view in view_dirs(path, data):
+        if not view.resolve().is_relative_to(path.resolve()):
+            raise NotReportable(path / RESULT_JSON, f"a view outside the run: {view}")
+        check_ties(view)
+        check_arrays(view)

@@ -207,9 +207,16 @@ def c2m_rows(evaluation: dict[str, Any]) -> list[list[Any]]:
     return rows
 
 
-def add_c2m(page: Page, entries: list[dict[str, Any]], title: str, paper_mae_mm: float) -> None:
+def add_c2m(
+    page: Page,
+    entries: list[dict[str, Any]],
+    title: str,
+    paper_mae_mm: float,
+    registration: str = "after ICP",
+) -> None:
     """Cloud-to-mesh histograms and percentiles (the paper's Fig. 6c), one per mesh entry
-    (``evaluation.json``'s ``meshes`` or a turntable's ``c2m``)."""
+    (``evaluation.json``'s ``meshes``, a turntable's ``c2m``, a robot scan's); the captions
+    say how the cloud was registered to the mesh (``registration``)."""
     section = page.section(title)
     for index, entry in enumerate(entries):
         hist = entry.get("histogram_mm", {})
@@ -231,7 +238,7 @@ def add_c2m(page: Page, entries: list[dict[str, Any]], title: str, paper_mae_mm:
                 note=note,
             ),  # fmt: skip
             f"Signed cloud-to-mesh distances of {entry.get('n', entry.get('n_points'))} points "
-            f"against {name} after ICP (the paper's Fig. 6c).",
+            f"against {name} {registration} (the paper's Fig. 6c).",
         )
     header = ["mesh", "points", "MAE", "RMSE", "mean", "p50 |d|", "p95 |d|", "p99 |d|", "max |d|"]
     rows = c2m_rows({"meshes": entries})
