@@ -28,6 +28,7 @@ def test_defaults_and_round_trip(tmp_path) -> None:
         ({"batch_size": True}, "batch_size"),
         ({"input_frame": -1}, "input_frame"),
         ({"amp": "yes"}, "amp"),
+        ({"direction": "x"}, "direction"),
         ({"epoch": 3}, "epoch"),
     ],
 )

@@ -48,3 +48,25 @@ def test_decoded_phase_matches_the_labels(learn_store) -> None:
         # wrong order is off by 2 pi
         error = np.abs(decoded[both] - label[both])
         assert np.mean(error < 0.3) > 0.99 and np.median(error) < 0.15
+
+
+def test_horizontal_fringes_give_the_h_labels_and_layer(horizontal_store) -> None:
+    """``direction="h"``: the input frame, the labels and the depth layer are those of the
+    horizontal fringes (a rig whose baseline is vertical measures depth with them)."""
+    data = LearnDataset(horizontal_store, None, "phase", direction="h")
+    raw = FringeDataset(horizontal_store, None, tensors=False)
+    frames = raw.meta(0)["sequence"]["frames"]
+    first = frames[data.frames[0]]
+    assert first["kind"] == "phase" and first["direction"] == "h" and first["step"] == 1
+    item, ref = data[0], raw[0]
+    valid = item["valid"].numpy()
+    assert valid.mean() > 0.5
+    np.testing.assert_array_equal(item["wrapped"].numpy()[valid], ref["wrapped"][1][valid])
+    layer, period = data.layer(0)
+    assert layer.axis == 1
+    phase = torch.from_numpy(np.where(valid, ref["phase"][1], np.nan).astype(np.float64))
+    depth = layer.depth(phase * period / (2 * np.pi)).numpy()
+    assert np.nanmax(np.abs(depth[valid] - ref["depth"][valid])) < 1e-5  # float32 labels
+    decoded = data.decoded_phase(0)
+    both = np.isfinite(decoded) & valid
+    assert np.median(np.abs(decoded[both] - ref["phase"][1][both])) < 0.15

@@ -23,7 +23,8 @@ number; lists of choices are drawn uniformly per sample)::
     sensor: [ideal]                # presets (ideal, paper, imx174, webcam) or files
     projector: [ideal]             # presets (ideal, paper, lightcrafter) or files
     fringes:
-      codings: [gray]              # gray (+ complementary frame) | heterodyne (3 periods)
+      codings: [gray]              # gray (+ complementary frame) | heterodyne (3 periods);
+                                   # [] with sequences: only the sequence files
       steps: [18]                  # phase steps N >= 3 (choices)
       periods: [18]                # finest period, projector px (choices)
       directions: [v, h]
@@ -333,7 +334,9 @@ def _fringes(data: Mapping[str, Any], base: Path | None) -> Fringes:
     if not isinstance(files, list) or len(files) > MAX_CHOICES:
         raise InputError("fringes.sequences", f"a list of at most {MAX_CHOICES} files", files)
     return Fringes(
-        codings=_choices("fringes.codings", section.get("codings", ["gray"]), coding),
+        codings=()  # only the sequence files
+        if files and section.get("codings") == []
+        else _choices("fringes.codings", section.get("codings", ["gray"]), coding),
         steps=_choices(
             "fringes.steps", section.get("steps", [18]), lambda n, v: _integer(n, v, 3, 256)
         ),

@@ -62,7 +62,9 @@ DEPTH_SCALE_MM_PER_M = 1000.0
 _MAT_HEADER = b"MATLAB 5.0 MAT-file, written by virtus (fpp-ml-bench export)".ljust(116)
 
 
-def input_frame_index(record: dict[str, Any], frame: int | str = "auto") -> int:
+def input_frame_index(
+    record: dict[str, Any], frame: int | str = "auto", direction: str = "v"
+) -> int:
     """The index of a sample's single-shot input frame in its sequence.
 
     Parameters
@@ -70,18 +72,21 @@ def input_frame_index(record: dict[str, Any], frame: int | str = "auto") -> int:
     record : the sample's record (its ``sequence`` and ``n_frames``).
     frame : ``"auto"`` -- the first phase step of the finest vertical-fringe set (the
         frame FPP-ML-Bench's single-shot input corresponds to) -- or a frame index.
+    direction : the fringe direction ``"auto"`` looks for (``"h"``: horizontal fringes,
+        for rigs whose baseline is vertical).
 
     Raises
     ------
-    InputError : the sequence has no vertical phase frame (``"auto"``), or the index is not
+    InputError : the sequence has no phase frame of ``direction`` (``"auto"``), or the index is not
         a frame of this sample's sequence (named ``frame``).
     """
     frames = record["sequence"]["frames"]
     n_frames = int(record.get("n_frames", len(frames)))
     if frame == "auto":
-        phase = [f for f in frames if f.get("kind") == "phase" and f.get("direction") == "v"]
+        phase = [f for f in frames if f.get("kind") == "phase" and f.get("direction") == direction]
         if not phase:
-            raise InputError("frame", "a sequence with vertical phase frames", "none")
+            what = "vertical" if direction == "v" else "horizontal"
+            raise InputError("frame", f"a sequence with {what} phase frames", "none")
         finest = min(float(f["period"]) for f in phase)
         first = [f for f in phase if float(f["period"]) == finest and int(f["step"]) == 1]
         return int((first or phase)[0]["index"])

@@ -40,7 +40,7 @@ def _one(config: Any, model: Any, capture: Any, directory: Path) -> dict[str, An
             "captures", "captures with a calibration (virtus import --calibration)", str(directory)
         )
     try:
-        frame = input_frame_index(_capture_record(capture), config.input_frame)
+        frame = input_frame_index(_capture_record(capture), config.input_frame, config.direction)
     except InputError as error:
         raise InputError(
             "captures",
@@ -48,18 +48,20 @@ def _one(config: Any, model: Any, capture: Any, directory: Path) -> dict[str, An
             f"{directory}: {error}",
         ) from None
     decoded = capture.decode()
-    if decoded.period_v is None:
-        raise InputError("captures", "a sequence with vertical phase-shift frames", str(directory))
-    scale = capture.sequence.axis_scale("v")
-    period_px = decoded.period_v / scale
-    layer = DepthLayer(capture.rig, "v")
-    ref_abs = np.where(decoded.mask_v, decoded.phase_v, np.nan)
+    d = config.direction
+    period, mask, phase = (getattr(decoded, f"{k}_{d}") for k in ("period", "mask", "phase"))
+    if period is None:
+        what = "vertical" if d == "v" else "horizontal"
+        raise InputError("captures", f"a sequence with {what} phase-shift frames", str(directory))
+    period_px = period / capture.sequence.axis_scale(d)
+    layer = DepthLayer(capture.rig, d)
+    ref_abs = np.where(mask, phase, np.nan)
     device = next(model.parameters()).device
     with torch.no_grad():
         ref_depth = layer.depth(torch.from_numpy(ref_abs * period_px / (2 * np.pi))).numpy()
         image = capture.frames[frame].astype(np.float32) / capture.full_scale
         out = model(torch.from_numpy(image)[None, None].to(device))[0].float().cpu()
-    valid = decoded.mask_v & np.isfinite(ref_depth)
+    valid = mask & np.isfinite(ref_depth)
     extra: dict[str, Any] = {}
     if config.model == "unet":
         pred = (out[0] * config.depth_range_m + config.depth_offset_m).numpy().astype(np.float64)
@@ -97,7 +99,7 @@ def evaluate_captures(
     Raises
     ------
     InputError : no capture given, a capture without a calibration, or one whose sequence
-        lacks the model's input frame or vertical phase frames.
+        lacks the model's input frame or the phase frames of its ``direction``.
     """
     from virtus.capture import Capture
     from virtus.learn.training import load_model

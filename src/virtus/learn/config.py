@@ -6,7 +6,10 @@ with alpha 0.7; arXiv 2601.08900)::
 
     model: unet              # unet: fringe -> depth | phase: fringe -> wrapped phase (sin,
                              # cos) -> the calibration layer -> depth
-    input_frame: auto        # 'auto' (first vertical phase step) or a frame index
+    input_frame: auto        # 'auto' (first phase step of `direction`) or a frame index
+    direction: v             # fringes the phase labels and depth come from: v (vertical,
+                             # u_p) or h (horizontal, v_p: for a baseline along the
+                             # camera's rows' normal, e.g. a projector above the camera)
     base_channels: 64        # UNet width (64: ~31 M parameters, theirs); 8 for tests
     levels: 4                # down-samplings (input padded to a multiple of 2**levels)
     seed: 0
@@ -60,6 +63,7 @@ class TrainConfig:
 
     model: str = "unet"
     input_frame: int | str = "auto"
+    direction: str = "v"
     base_channels: int = 64
     levels: int = 4
     seed: int = 0
@@ -86,6 +90,8 @@ class TrainConfig:
         d = {**asdict(cls()), **data}
         if d["model"] not in MODELS:
             raise InputError("model", f"one of {', '.join(MODELS)}", d["model"])
+        if d["direction"] not in ("v", "h"):
+            raise InputError("direction", "v or h", d["direction"])
         frame = d["input_frame"]
         if frame != "auto":
             frame = _int("input_frame", frame, 0, 4095)
@@ -96,6 +102,7 @@ class TrainConfig:
         return cls(
             model=d["model"],
             input_frame=frame,
+            direction=d["direction"],
             base_channels=_int("base_channels", d["base_channels"], 1, 256),
             levels=_int("levels", d["levels"], 1, 7),
             seed=_int("seed", d["seed"], 0, 2**63 - 1),

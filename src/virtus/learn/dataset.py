@@ -7,7 +7,7 @@ checksum). Item ``i`` is a dict of tensors (``H x W`` camera pixels, ``[row, col
     depth    (H, W)    float32  metres (camera z); 0 where ``surface`` is False
     surface  (H, W)    bool     a surface is seen (finite depth)
     object   (H, W)     bool     the surface is an object, not a background plane or board
-    wrapped  (H, W)    float32  exact wrapped phase of the vertical fringes, rad; 0 where
+    wrapped  (H, W)    float32  exact wrapped phase of the ``direction`` fringes, rad; 0 where
                                 ``valid`` is False               (phase model only)
     order    (H, W)    int64    its fringe order; -1 where invalid (phase model only)
     valid    (H, W)    bool     phase labels valid (lit, decodable)   (phase model only)
@@ -46,7 +46,9 @@ def needed_arrays(model: str) -> tuple[str, ...]:
 
 
 class LearnDataset:
-    """Items for training ``model`` from a store's ``split`` (module docstring).
+    """Items for training ``model`` from a store's ``split`` (module docstring); the phase
+    labels, the input frame ``"auto"`` and the depth layer are those of the ``direction``
+    fringes (``"v"``: vertical, ``u_p``; ``"h"``: horizontal, ``v_p``).
 
     Raises
     ------
@@ -55,7 +57,12 @@ class LearnDataset:
     """
 
     def __init__(
-        self, store: str | Path, split: str | None, model: str, frame: int | str = "auto"
+        self,
+        store: str | Path,
+        split: str | None,
+        model: str,
+        frame: int | str = "auto",
+        direction: str = "v",
     ) -> None:
         require_torch()
         probe = FringeDataset(store, split, tensors=False)
@@ -65,16 +72,21 @@ class LearnDataset:
                 "store", f"a store with the labels the {model} model needs", f"no {missing}"
             )
         self.base = FringeDataset(store, split, _NEEDS[model], tensors=False)
-        self.model = model
-        if model == "phase":  # its labels are those of the vertical fringes
+        self.model, self.direction = model, direction
+        what = "vertical" if direction == "v" else "horizontal"
+        if model == "phase":  # its labels are those of the direction's fringes
             for i in range(len(self)):
                 frames = self.base.meta(i)["sequence"]["frames"]
-                if not any(f.get("kind") == "phase" and f.get("direction") == "v" for f in frames):
+                if not any(
+                    f.get("kind") == "phase" and f.get("direction") == direction for f in frames
+                ):
                     raise InputError(
-                        "store", "the vertical-fringe phase labels the phase model needs",
-                        f"sample {self.base.indices[i]} without vertical fringes",
+                        "store", f"the {what}-fringe phase labels the phase model needs",
+                        f"sample {self.base.indices[i]} without {what} fringes",
                     )  # fmt: skip
-        self.frames = [input_frame_index(self.base.meta(i), frame) for i in range(len(self))]
+        self.frames = [
+            input_frame_index(self.base.meta(i), frame, direction) for i in range(len(self))
+        ]
         self._layers: dict[str, tuple[Any, float]] = {}
 
     def __getstate__(self) -> dict[str, Any]:
@@ -106,8 +118,9 @@ class LearnDataset:
             "index": int(data["index"]),
         }
         if self.model == "phase":
-            wrapped = data["wrapped"][0].astype(np.float32)
-            order = data["order"][0].astype(np.int64)
+            axis = 0 if self.direction == "v" else 1  # the labels' direction axis (v, h)
+            wrapped = data["wrapped"][axis].astype(np.float32)
+            order = data["order"][axis].astype(np.int64)
             valid = np.isfinite(wrapped) & (order >= 0) & surface
             out["wrapped"] = torch.from_numpy(np.where(valid, wrapped, 0.0).astype(np.float32))
             out["order"] = torch.from_numpy(np.where(valid, order, -1))
@@ -115,7 +128,7 @@ class LearnDataset:
         return out
 
     def decoded_phase(self, item: int) -> np.ndarray:
-        """``(H, W)`` float64 absolute phase of the vertical fringes (rad) decoded from the
+        """``(H, W)`` float64 absolute phase of the ``direction`` fringes (rad) decoded from the
         sample's own frames (phase steps with its code frames or second frequency, as its
         sequence has them: :meth:`virtus.patterns.PatternSequence.decode`); NaN where the
         decode is invalid. Unwrapping a single-shot prediction to the branch nearest it is
@@ -131,14 +144,16 @@ class LearnDataset:
         with warnings.catch_warnings():  # a poor decode shows as order errors instead
             warnings.simplefilter("ignore")
             decoded = sequence.decode(frames, full_scale=full_scale)
+        if self.direction == "h":
+            return np.where(decoded.mask_h, decoded.phase_h, np.nan)
         return np.where(decoded.mask_v, decoded.phase_v, np.nan)
 
     def layer(self, item: int) -> tuple[Any, float]:
-        """The sample's depth layer and finest vertical period (projector px), cached."""
+        """The sample's depth layer and finest period of ``direction`` (projector px), cached."""
         from virtus.learn.triangulate import DepthLayer
 
         meta = self.base.meta(item)
         key = json.dumps([meta["rig"], meta["sequence"]], sort_keys=True)
         if key not in self._layers:  # samples of one rig and sequence share one layer
-            self._layers[key] = DepthLayer.from_record(meta, "v")
+            self._layers[key] = DepthLayer.from_record(meta, self.direction)
         return self._layers[key]

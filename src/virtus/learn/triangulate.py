@@ -46,6 +46,8 @@ _MIN_SINE = 1e-9
 #: Newton on the projected coordinate of a distorted projector (float64), as the reference.
 _NEWTON_TOL_PX = 1e-9
 _NEWTON_MAX_ITER = 30
+#: Largest Newton step (normalised coordinates) at which the undistortion has converged.
+_START_TOL = 1e-15
 
 
 def phase_to_coordinate(phase: Any, period_px: float) -> Any:
@@ -178,8 +180,12 @@ class DepthLayer(torch.nn.Module):
             rx, ry = fx_.detach() - xd, fy_.detach() - yd
             det = a * d - b * c
             det = torch.where(det.abs() > 0, det, torch.ones_like(det))
-            x = (x.detach() - (d * rx - b * ry) / det).detach()
-            y = (y.detach() - (a * ry - c * rx) / det).detach()
+            dx, dy = (d * rx - b * ry) / det, (a * ry - c * rx) / det
+            x, y = (x.detach() - dx).detach(), (y.detach() - dy).detach()
+            # Converged everywhere (steps below 1e-15 normalised, ~1e-12 px): the remaining
+            # iterations would not move it (a NaN step keeps iterating, as before).
+            if float(torch.maximum(dx.abs().max(), dy.abs().max())) < _START_TOL:
+                break
         return x if self.axis == 0 else y
 
     def _newton(self, coord: Any, s: Any, ok: Any) -> tuple[Any, Any]:
