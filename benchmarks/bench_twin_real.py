@@ -10,10 +10,9 @@ clone or a bare git directory of that repository (e.g. a ``git clone --bare``).
 
 What it does, printing and writing (``--json``) every number:
 
-1. stages the calibration folder: the lab names its one camera ``...Right`` (its
-   ``CamRotationMatrixRight``/``CamTranslationVectorRight`` are the identity and zero), which
-   virtus reads as a stereo pair's second device, the projector; the camera's two files are
-   copied as ``CamIntrinsicMatrix.txt`` / ``CamDistortionCoefficients.txt``;
+1. stages the calibration folder as the lab names it (its one camera ``...Right`` beside
+   ``Proj...`` files: :mod:`virtus.calib.names` reads those as the camera; the circle-point
+   files are named as ignored);
 2. imports the BMPs (:func:`virtus.pipeline.capture.import_images`) and decodes them with
    fringe-order repair: valid and flagged pixels on the board;
 3. the geometric twin (ideal projector, ideal 8-bit camera): the board posed from both
@@ -49,15 +48,14 @@ import numpy as np
 COMMIT = "561120bda012c02f35e0e2a3c3517daf41a888d7"
 CAPTURE_DIR = "3D_reconstruction/data00/p00"
 CALIBRATION_DIR = "3D_reconstruction/CalibrationDataDistortion"
-#: The lab's calibration files and the names virtus reads them under.
-CALIBRATION_FILES = {
-    "CamIntrinsicMatrixRight.txt": "CamIntrinsicMatrix.txt",
-    "CamDistortionCoefficientsRight.txt": "CamDistortionCoefficients.txt",
-    "ProjIntrinsicMatrix.txt": "ProjIntrinsicMatrix.txt",
-    "ProjDistortionCoefficients.txt": "ProjDistortionCoefficients.txt",
-    "ProjRotationMatrix.txt": "ProjRotationMatrix.txt",
-    "ProjTranslationVector.txt": "ProjTranslationVector.txt",
-}
+#: The lab's calibration folder, copied unchanged (names as the lab wrote them).
+CALIBRATION_FILES = (
+    *("CamIntrinsicMatrixRight.txt", "CamDistortionCoefficientsRight.txt"),
+    *("CamRotationMatrixRight.txt", "CamTranslationVectorRight.txt"),
+    *("ProjIntrinsicMatrix.txt", "ProjDistortionCoefficients.txt"),
+    *("ProjRotationMatrix.txt", "ProjTranslationVector.txt"),
+    *("cameraCirclePointsRight.txt", "projectorCirclePoints.txt"),
+)
 #: The board: 7 circles per column, 21 columns, 20 mm between neighbours of a column (the
 #: board's own label, "10 mm", is OpenCV's asymmetric-grid unit, half that); the circles'
 #: diameter measured on the white frame (area of the thresholded blobs: 48.6 px at 6.66 px/mm).
@@ -72,7 +70,7 @@ KEYS = (
 
 
 def stage(source: Path, work: Path) -> tuple[Path, Path]:
-    """The capture's BMPs and the renamed calibration folder under ``work``."""
+    """The capture's BMPs and the lab's calibration folder under ``work``."""
     images, calibration = work / "images", work / "calibration"
     images.mkdir(parents=True)
     calibration.mkdir()
@@ -90,8 +88,8 @@ def stage(source: Path, work: Path) -> tuple[Path, Path]:
 
     for index in range(52):
         copy(f"{CAPTURE_DIR}/{index:02d}.Bmp", images / f"{index:02d}.bmp")
-    for name, renamed in CALIBRATION_FILES.items():
-        copy(f"{CALIBRATION_DIR}/{name}", calibration / renamed)
+    for name in CALIBRATION_FILES:
+        copy(f"{CALIBRATION_DIR}/{name}", calibration / name)
     return images, calibration
 
 

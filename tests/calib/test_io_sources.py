@@ -26,7 +26,7 @@ from virtus.calib.io import (
     save_opencv_yaml,
     save_paper_txt,
 )
-from virtus.calib.names import name_role
+from virtus.calib.names import name_role, name_roles, side_read_as_camera
 from virtus.calib.sources import NONE_GIVEN, uncalibrated_rig
 from virtus.errors import InputError
 
@@ -101,6 +101,71 @@ def test_the_stereo_folders_sides_decide_the_device() -> None:
         assert name_role(name)[0] is None, name
 
 
+#: The file names of the LightCrafter lab's calibration folder
+#: (kimthyung/3D_Reconstruction_with_Fringe_pattern, 3D_reconstruction/
+#: CalibrationDataDistortion/): its one camera is "Right", beside Proj... files. Names only
+#: (facts); the values here are RIG's. save_paper_txt's file -> the lab's name.
+LAB_NAMES = {
+    "CamIntrinsicMatrix.txt": "CamIntrinsicMatrixRight.txt",
+    "CamDistortion.txt": "CamDistortionCoefficientsRight.txt",
+    "ProjIntrinsicMatrix.txt": "ProjIntrinsicMatrix.txt",
+    "ProjDistortion.txt": "ProjDistortionCoefficients.txt",
+    "ProjRotationMatrix.txt": "ProjRotationMatrix.txt",
+    "ProjTranslationVector.txt": "ProjTranslationVector.txt",
+}
+#: The lab folder's other files: the camera's pose (identity, zero) and circle points.
+LAB_EXTRA = {
+    "CamRotationMatrixRight.txt": "1\t0\t0\n0\t1\t0\n0\t0\t1\n",
+    "CamTranslationVectorRight.txt": "0\n0\n0\n",
+    "cameraCirclePointsRight.txt": "512.5\t301.25\n530.0\t301.5\n",
+    "projectorCirclePoints.txt": "400.5\t300.25\n420.0\t300.5\n",
+}
+
+
+def test_a_labs_right_camera_beside_proj_files_is_the_camera(tmp_path: Path) -> None:
+    folder = _folder(tmp_path, LAB_NAMES)
+    for name, text in LAB_EXTRA.items():
+        (folder / name).write_text(text)
+    with pytest.warns(CalibrationFileWarning) as caught:
+        rig, sources = load_calibration_report(folder, **SIZES)
+    _assert_same_rig(rig)
+    # The camera's own distortion is read (it was once refused or dropped as zeros).
+    assert np.array_equal(rig.camera.intrinsics.dist_array, RIG.camera.intrinsics.dist_array)
+    rows = dict(sources.lines())
+    assert rows["camera matrix"] == "CamIntrinsicMatrixRight.txt"
+    assert rows["camera distortion"] == "CamDistortionCoefficientsRight.txt"
+    assert rows["projector matrix"] == "ProjIntrinsicMatrix.txt"
+    assert rows["projector distortion"] == "ProjDistortionCoefficients.txt"
+    assert rows["camera image size"] == "given: camera_size"
+    assert rows["extrinsics"].startswith(
+        "ProjRotationMatrix.txt, ProjTranslationVector.txt, CamRotationMatrixRight.txt, "
+        "CamTranslationVectorRight.txt"
+    )
+    assert rows["note"] == (
+        "Right read as the camera (the projector's names start with Proj): "
+        "CamIntrinsicMatrixRight.txt, CamDistortionCoefficientsRight.txt, "
+        "CamRotationMatrixRight.txt, CamTranslationVectorRight.txt"
+    )
+    # The circle points are named, never used silently.
+    ignored = {"cameraCirclePointsRight.txt", "projectorCirclePoints.txt"}
+    assert set(sources.ignored) == ignored
+    assert {str(w.message).split("ignored: ")[1].split(" ")[0] for w in caught} == ignored
+
+
+def test_sides_read_with_their_sources_names() -> None:
+    lab = name_roles(["CamIntrinsicMatrixRight", "CamRotationMatrixRight", "ProjRotationMatrix"])
+    assert [role for role, _ in lab.values()] == ["camera_matrix", "cam_R", "R"]
+    # Without a projector name the side decides, as in a stereo tool's folder.
+    stereo = name_roles(["CamIntrinsicMatrixLeft", "CamIntrinsicMatrixRight"])
+    assert [role for role, _ in stereo.values()] == ["camera_matrix", "projector_matrix"]
+    # A projector-prefixed name that is no quantity does not change the reading.
+    points = name_roles(["CamIntrinsicMatrix2", "projectorCirclePoints"])
+    assert [role for role, _ in points.values()] == ["projector_matrix", None]
+    assert side_read_as_camera("CamDistortionCoefficientsRight") == "Right"
+    assert side_read_as_camera("cam_K_2") == "2"
+    assert side_read_as_camera("CamIntrinsicMatrixLeft") == side_read_as_camera("K2") == ""
+
+
 def test_an_unrecognised_distortion_file_is_named_never_dropped(tmp_path: Path) -> None:
     folder = _folder(tmp_path, {"CamDistortion.txt": "CamLensDistortionModel.txt"})
     (folder / "notes.md").write_text("bench of 2026-11\n")
@@ -122,10 +187,11 @@ def test_an_unrecognised_distortion_file_is_named_never_dropped(tmp_path: Path) 
 
 
 def test_two_files_for_one_role_are_refused_naming_both(tmp_path: Path) -> None:
-    # A paper folder plus the stereo spelling of the projector's distortion.
+    # A paper folder (Proj... names) plus a Right camera distortion: beside Proj names a
+    # Cam...Right file is the camera's, so it clashes with CamDistortion.txt.
     folder = _folder(tmp_path)
     shutil.copy(folder / "ProjDistortion.txt", folder / "CamDistortionCoefficientsRight.txt")
-    with pytest.raises(InputError, match=r"CamDistortionCoefficientsRight.txt.*ProjDistortion"):
+    with pytest.raises(InputError, match=r"CamDistortion.txt.*CamDistortionCoefficientsRight"):
         load_calibration(folder, **SIZES)
     folder = _folder(tmp_path / "b")
     shutil.copy(folder / "CamIntrinsicMatrix.txt", folder / "CamIntrinsicMatrixLeft.txt")

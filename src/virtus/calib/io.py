@@ -35,9 +35,11 @@ file lacks taken from a known rig. Accepted inputs:
   ``ProjDistortion[Coefficients].txt``; or the stereo spelling ``CamIntrinsicMatrixLeft.txt``
   (camera), ``CamIntrinsicMatrixRight.txt`` (projector), ``CamRotationMatrixRight.txt``,
   ``CamTranslationVectorRight.txt``, ``CamDistortionCoefficientsLeft/Right.txt``, or ``1``/``2``
-  for ``Left``/``Right``. Numbers separated by tabs, spaces or commas; a matrix as 3 rows of
-  3; a vector as one row or one value per line (told apart by shape); lines starting with
-  ``#`` or ``%`` are comments.
+  for ``Left``/``Right``; beside ``Proj...`` files a ``Cam...Right`` file is the camera's
+  (a lab's one camera, :func:`virtus.calib.names.name_roles`; the record notes it).
+  Numbers separated by tabs, spaces or commas; a matrix as 3 rows of 3; a vector as one row
+  or one value per line (told apart by shape); lines starting with ``#`` or ``%`` are
+  comments.
 
 **Every file is used or named.** Two files (nodes, keys) for one quantity are refused,
 naming both. A folder's file that matches no quantity is named in a
@@ -117,6 +119,7 @@ from virtus.calib.names import (
     SIZE_PAIR_NAMES,
     UNITS_NAMES,
     name_role,
+    name_roles,
     normalize,
 )
 from virtus.calib.sources import NONE_GIVEN, CalibrationSources, record_of
@@ -613,8 +616,9 @@ def _collect(
     (which to trust?). ``units_node``: a ``units`` key is the units (else it is unused)."""
     by_role: dict[str, list[str]] = {}
     unused: list[tuple[str, str]] = []
+    roles = name_roles(key for key, _ in items.values())
     for name, (key, _) in items.items():
-        role, why = name_role(key)
+        role, why = roles[key]
         if role == "units" and not units_node:
             role, why = None, "units are not read from a text folder (mm, or --units)"
         if role is None:

@@ -17,6 +17,18 @@ tools), then as a **structured name** ``[device] quantity [side]`` (:func:`name_
   first, as ``K1 D1 K2 D2 R T``). The side decides the device: ``CamIntrinsicMatrixRight``
   is the projector's matrix (a stereo tool's "right camera"), ``ProjIntrinsicMatrixLeft``
   contradicts itself and matches nothing.
+* **except beside projector names**: when the names of one source (a folder's file stems, a
+  file's keys; :func:`name_roles`) include a projector-prefixed quantity (``Proj...``,
+  ``Projector...``), the projector is named, and a ``Cam...`` name with any side is **the
+  camera**: the side then says which camera of a stereo bench the lab kept, not which
+  device. A LightCrafter lab's folder (kimthyung/3D_Reconstruction_with_Fringe_pattern,
+  ``CalibrationDataDistortion/``) holds ``CamIntrinsicMatrixRight.txt``,
+  ``CamDistortionCoefficientsRight.txt``, ``CamRotationMatrixRight.txt`` (the identity),
+  ``CamTranslationVectorRight.txt`` (zero) beside ``ProjIntrinsicMatrix.txt``,
+  ``ProjDistortionCoefficients.txt``, ``ProjRotationMatrix.txt``,
+  ``ProjTranslationVector.txt``: its only camera is its "Right" one. A second camera
+  (``Cam...Left`` and ``Cam...Right`` beside ``Proj...``) is then two files for one quantity,
+  refused by the reader.
 
 A rotation or translation of a device is its pose in the file's reference frame,
 X_device = R X_ref + T (the paper code's ``ProjRotationMatrix``; ``CamRotationMatrixRight``
@@ -30,6 +42,7 @@ D2`` are in the table.
 from __future__ import annotations
 
 import re
+from collections.abc import Iterable
 
 __all__ = [
     "CALIBRATION_NAMES",
@@ -38,7 +51,9 @@ __all__ = [
     "SIZE_PAIR_NAMES",
     "UNITS_NAMES",
     "name_role",
+    "name_roles",
     "normalize",
+    "side_read_as_camera",
 ]
 
 #: Names of each calibration quantity in FileStorage nodes, ``.npz`` keys and text-file stems
@@ -141,8 +156,34 @@ _PAIRS = {
 }
 
 
-def name_role(name: str) -> tuple[str | None, str]:
+def name_roles(names: Iterable[str]) -> dict[str, tuple[str | None, str]]:
+    """The role of each of ``names``, the names of one source (a folder's file stems, a
+    file's keys), read together: :func:`name_role` of each, with ``projector_named`` True
+    when one of them is a projector's by its device prefix (``Proj...``; module docstring).
+    """
+    keys = list(dict.fromkeys(names))
+    named = any(
+        _device(normalize(key))[0] == "projector" and name_role(key)[0] is not None for key in keys
+    )
+    return {key: name_role(key, projector_named=named) for key in keys}
+
+
+def side_read_as_camera(name: str) -> str:
+    """The side (``"Right"`` or ``"2"``) of a camera-prefixed ``name`` that only a
+    projector-named source reads as the camera's (:func:`name_roles`), else ``""``; for the
+    note saying so."""
+    device, rest = _device(normalize(name))
+    if device != "camera":
+        return ""
+    side = next((s for s, d in _SIDES if rest.endswith(s) and d == "projector"), "")
+    return {"right": "Right", "2": "2"}.get(side, "")
+
+
+def name_role(name: str, *, projector_named: bool = False) -> tuple[str | None, str]:
     """The role of ``name`` and why.
+
+    ``projector_named``: the source also names the projector by a ``Proj...`` prefix, so a
+    ``Cam...`` name with a side is the camera's (module docstring; :func:`name_roles`).
 
     ``(quantity, "")`` for a quantity of :data:`CALIBRATION_NAMES`; ``("camera_shape", "")``
     or ``("projector_shape", "")`` for a (height, width) shape of :data:`SHAPE_NAMES`;
@@ -159,13 +200,18 @@ def name_role(name: str) -> tuple[str | None, str]:
         return f"pair:{quantity}:{index}:{side}", ""
     if key in UNITS_NAMES:
         return "units", ""
-    return _structured(key)
+    return _structured(key, projector_named)
 
 
-def _structured(key: str) -> tuple[str | None, str]:
-    """The role of a normalized ``[device] quantity [side]`` name (module docstring)."""
+def _device(key: str) -> tuple[str | None, str]:
+    """The device a normalized name starts with (``None`` if none) and the rest."""
     prefixed = [(d, key[len(p) :]) for p, d in _DEVICES if key.startswith(p)]
-    device, rest = prefixed[0] if prefixed else (None, key)
+    return prefixed[0] if prefixed else (None, key)
+
+
+def _structured(key: str, projector_named: bool = False) -> tuple[str | None, str]:
+    """The role of a normalized ``[device] quantity [side]`` name (module docstring)."""
+    device, rest = _device(key)
     suffixed = [(d, rest[: -len(s)]) for s, d in _SIDES if rest.endswith(s)]
     side, word = suffixed[0] if suffixed else (None, rest)
     quantity = next((q for q, words in QUANTITY_WORDS.items() if word in words), None)
@@ -177,7 +223,7 @@ def _structured(key: str) -> tuple[str | None, str]:
         return None, f"a one-letter {quantity} with a 1/2 suffix (a rectification matrix?)"
     if device == "projector" and side == "camera":
         return None, "names the projector (Proj) and the camera (Left/1) at once"
-    which = side or device
+    which = "camera" if device == "camera" and projector_named else side or device
     if quantity in ("rotation", "translation"):
         letter = "R" if quantity == "rotation" else "T"
         return (letter if which == "projector" else f"cam_{letter}"), ""

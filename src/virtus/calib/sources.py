@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from virtus.calib.names import side_read_as_camera
 from virtus.geometry.devices import Camera, Projector, Rig
 from virtus.geometry.optics import Intrinsics
 from virtus.geometry.transforms import Pose
@@ -132,6 +133,7 @@ def record_of(
         }
     extrinsics = ", ".join(label(key) for key in used["extrinsics"])
     return CalibrationSources(
+        notes=_sides_read_as_camera(used, label),
         path=str(path),
         format=fmt,
         camera=devices["camera"],
@@ -140,6 +142,23 @@ def record_of(
         units=units,
         ignored=tuple(ignored),
         files=tuple(str(f) for f in (files or (path,))),
+    )
+
+
+def _sides_read_as_camera(used: dict[str, Any], label: Callable[[str], str]) -> tuple[str, ...]:
+    """The note of a source whose ``Cam...Right`` (``2``) names were read as the camera's
+    because it names the projector ``Proj...`` (:func:`virtus.calib.names.name_roles`)."""
+
+    def side(key: str) -> str:
+        return side_read_as_camera(key[: -len(".txt")] if key.lower().endswith(".txt") else key)
+
+    if not any(side(key) for key in used["camera"].values() if key):
+        return ()
+    keys = [key for key in (*used["camera"].values(), *used["extrinsics"]) if key and side(key)]
+    sides = "/".join(sorted({side(key) for key in keys}))
+    return (
+        f"{sides} read as the camera (the projector's names start with Proj): "
+        + ", ".join(label(key) for key in keys),
     )
 
 
