@@ -128,12 +128,12 @@ def test_twin_capture_lists_accumulate(option, tmp_path, monkeypatch, capsys) ->
         seen.extend(captures)
         raise VirtusError("stop here")
 
-    def write(calibration, out, *, fit=None, **kwargs):  # noqa: ANN001, ANN202
-        seen.extend(fit or [])
+    def run(calibration, out, *, fit=None, **kwargs):  # noqa: ANN001, ANN202
+        seen.extend(fit or [])  # the twin job: it reads the calibration before fitting
         raise VirtusError("stop here")
 
     monkeypatch.setattr(job, "check_validation", check)
-    monkeypatch.setattr(job, "write_twin", write)
+    monkeypatch.setattr(job, "run_twin", run)
     argv = ["twin", "cal.json", "--out", str(tmp_path / "t"), option, "a", option, "b"]
     code, _out, err = _run(argv, capsys)
     assert (code, err) == (2, "virtus: error: stop here\n")
