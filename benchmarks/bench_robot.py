@@ -18,6 +18,8 @@ Sections (each prints a line and lands in OUT/bench_robot.json):
    joint noise sigma in JOINT_NOISE (rad; the renders do not depend on it): merged C2M MAE
    (mm) with kinematics alone, after view-to-view ICP (no mesh; anchored on the kinematic
    average of the views, and on the first view) and after per-view ICP onto the mesh.
+   Full size on a 2-core CPU (2026-11-27): 3.3 min in all -- planning 17 s (mostly IK), 7
+   views 4.6-13.5 s each, merge/ICP/C2M/coverage 18 s, then 22-37 s per joint noise.
 5. Hand-eye from rendered board captures at 10 poses (camera on the hand looking at a board
    on the floor from ~0.9 m, +-25 deg; the paper's 4x7 board and a 54 x 60 mm one):
    errors against the mounted truth with the ideal sensor and with the IMX174 preset

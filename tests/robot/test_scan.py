@@ -44,7 +44,7 @@ def scanned(tmp_path_factory) -> tuple[Path, object]:
         plan=2,
         candidates=8,
         joint_noise_rad=1e-4,
-        icp=True,
+        icp="views",
         seed=1,
         coverage_radius_m=RADIUS_M,
     )
@@ -88,7 +88,7 @@ def test_resume_keeps_the_views_and_other_settings_are_refused(scanned) -> None:
         plan=2,
         candidates=8,
         joint_noise_rad=1e-4,
-        icp=True,
+        icp="views",
         seed=1,
         resume=True,
         coverage_radius_m=RADIUS_M,
@@ -104,7 +104,7 @@ def test_resume_keeps_the_views_and_other_settings_are_refused(scanned) -> None:
             plan=2,
             candidates=8,
             joint_noise_rad=2e-4,
-            icp=True,
+            icp="views",
             seed=1,
             resume=True,
         )
@@ -122,3 +122,29 @@ def test_bad_arguments_are_refused_before_anything_is_written(tmp_path: Path) ->
     with pytest.raises(InputError, match="7 joint values"):
         robot_scan(setup, "freeform", out, scanner=tiny_scanner(), trajectory=bad)
     assert not out.exists()
+
+
+def test_a_view_misplaced_by_its_joints_is_brought_back_without_the_mesh(scanned) -> None:
+    from virtus.pipeline.evaluate import evaluate_points
+    from virtus.robot.scan import merge_views
+
+    out, result = scanned
+    setup = load_robot_file(EXAMPLE)
+    q = np.array(json.loads((out / "trajectory.json").read_text())["q"])
+    clouds = [view.reconstruction.cloud() for view in result.views]
+    reported = q.copy()
+    reported[1, 1] += 2e-3  # shoulder 2 mrad off: the second view ~1.5 mm from the truth
+    first = merge_views(setup, reported, clouds, result.meshes, anchor="first", seed=2)
+    kin, icp = first.record["c2m_kinematics"][0], first.record["c2m_icp"][0]
+    # the registration used no mesh (the truth only measures the result); the first view
+    # is where kinematics put it, the second is brought onto it
+    assert kin["mae_mm"] > 0.3 and icp["mae_mm"] < 0.05
+    again = merge_views(setup, reported, clouds, result.meshes, anchor="first", seed=2)
+    np.testing.assert_array_equal(again.merged_icp, first.merged_icp)
+    # anchored on the kinematic average, the error of one view of two is shared by both:
+    # the cloud as a whole is off, but its views lie on each other (one rigid fit to the
+    # mesh takes the rest out)
+    shared = merge_views(setup, reported, clouds, result.meshes, seed=2)
+    assert shared.record["c2m_icp"][0]["mae_mm"] > 0.1
+    fitted = evaluate_points(shared.merged_icp, result.meshes, register=True)[0].to_dict()
+    assert fitted["mae_mm"] < 0.05

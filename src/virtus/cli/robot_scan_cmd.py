@@ -48,8 +48,13 @@ def robot_scan(
         ),
     ] = 0.0,
     icp: Annotated[
-        bool, typer.Option("--icp/--no-icp", help="Also refine each view by ICP.")
-    ] = False,
+        str,
+        typer.Option(
+            help="Refine the views by ICP: 'views' (each onto the merged cloud so far; "
+            "no mesh needed), 'mesh' (each onto the scene's meshes; an evaluation aid) "
+            "or 'none'."
+        ),
+    ] = "views",
     package_path: PackagePathOption = None,
     options: ScannerOptions,
     seed: SeedOption = 0,

@@ -6,12 +6,15 @@ in it and the rig at ``cam2world = base2world @ FK(q) @ cam2link``, decodes and
 reconstructs the view (the scan job's :func:`virtus.pipeline.scan.scan_into`, resumable per
 view), and maps the view's cloud into the world with the **reported** joint values
 ``q + noise`` (``joint_noise_rad``: one normal draw per joint and view, seeded, clipped to
-the limits -- encoder and joint-offset errors of the arm). The clouds are merged, and
-optionally each view is first refined by point-to-plane ICP onto the scene's meshes (the
-same registration ``virtus evaluate`` uses, per view). The merged clouds are measured
-against the scene's meshes: C2M **without** any registration (kinematics alone), and after
-the per-view ICP; coverage is the share of surface samples with a merged point within
-``coverage_radius_m``.
+the limits -- encoder and joint-offset errors of the arm). The clouds are merged and, by
+default, registered **view to view** (``icp="views"``: point-to-plane ICP of each view onto
+the merged cloud so far, :mod:`virtus.robot.registration`; what a real scan without a mesh
+can do); ``icp="mesh"`` registers each view onto the scene's meshes instead (the registration
+``virtus evaluate`` uses: an evaluation aid, it needs the truth), ``icp="none"`` skips it.
+The merged clouds are measured against the scene's meshes: C2M **without** any
+registration (kinematics alone), and after the ICP; coverage is the share of surface
+samples with a merged point within ``coverage_radius_m``. ``progress`` receives one line
+per stage (planning, each view, merge, ICP, C2M, coverage) with the seconds since the start.
 
 Run directory (owned by the run, :func:`virtus.io.runs.claim_run`, command ``robot-scan``):
 
@@ -23,7 +26,7 @@ Run directory (owned by the run, :func:`virtus.io.runs.claim_run`, command ``rob
                             (``q`` rendered, ``q_reported``, poses)
 ``robot/view_NNN.stl``      the robot's links at that view (world frame, metres)
 ``merged.ply``              merged cloud, world frame, metres, kinematics alone
-``merged_icp.ply``          merged cloud after per-view ICP (with ``icp``)
+``merged_icp.ply``          merged cloud after the ICP (unless ``icp="none"``)
 ``robot_scan.json``         per-view poses and counts, C2M (mm) and coverage
 ==========================  =====================================================
 
@@ -34,6 +37,8 @@ points stay out of the object's box); the robot file places the robot in that wo
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -54,7 +59,16 @@ from virtus.robot.planning import (
     view_coverage,
 )
 
-__all__ = ["COMMAND", "FREEFORM_CENTRE_M", "RobotScanResult", "robot_scan"]
+__all__ = [
+    "COMMAND",
+    "FREEFORM_CENTRE_M",
+    "ICP_MODES",
+    "MergedViews",
+    "RobotScanResult",
+    "merge_views",
+    "reported_joints",
+    "robot_scan",
+]
 
 COMMAND = "robot-scan"
 #: The free-form object's centre in the robot scan's built-in world (metres, z up).
@@ -74,8 +88,15 @@ LAYOUT = (
     "robot/*",
     "freeform.stl",
 )
-#: Surface samples of the coverage measure.
-COVERAGE_SAMPLES = 20_000
+#: Surface samples of the coverage measure (a share's sampling error <= 0.5 %).
+COVERAGE_SAMPLES = 10_000
+#: Registration modes: view to view (no mesh needed), each view onto the mesh, none.
+ICP_MODES = ("views", "mesh", "none")
+#: The working volume registered by view-to-view ICP: the meshes' box grown by this (m).
+REGION_MARGIN_M = 0.01
+#: Most merged points measured by C2M: beyond it, a seeded sample of the points in the
+#: working volume (the same indices before and after the ICP; MAE's sampling error ~0.3 %).
+C2M_POINTS = 100_000
 #: Largest joint noise accepted (rad): beyond it the views do not overlap any more.
 MAX_JOINT_NOISE_RAD = 0.1
 
@@ -83,13 +104,16 @@ MAX_JOINT_NOISE_RAD = 0.1
 @dataclass
 class RobotScanResult:
     """Outcome of :func:`robot_scan`: the run directory, the record written to
-    ``robot_scan.json`` and the merged clouds (world frame, metres)."""
+    ``robot_scan.json``, the merged clouds (world frame, metres), each view's scan result
+    and the scene's meshes (for :func:`merge_views` with other joint errors)."""
 
     directory: Path
     record: dict[str, Any]
     merged: np.ndarray
     merged_icp: np.ndarray | None = None
     views: list[Any] = field(default_factory=list)
+    meshes: list[Any] = field(default_factory=list)
+    """The scene's meshes (world frame) the C2M is measured against."""
 
 
 class _RobotScanner:
@@ -128,13 +152,14 @@ def robot_scan(
     trajectory: str | Path | None = None,
     plan: int | None = None,
     joint_noise_rad: float = 0.0,
-    icp: bool = False,
+    icp: str = "views",
     seed: int = 0,
     coverage: CoverageSettings | None = None,
     coverage_radius_m: float = 1e-3,
     candidates: int = 48,
     overwrite: bool = False,
     resume: bool = False,
+    progress: Callable[[str], None] | None = None,
 ) -> RobotScanResult:
     """Scan ``scene`` from the robot (see the module docs).
 
@@ -146,12 +171,14 @@ def robot_scan(
     scanner : the :class:`~virtus.scanner.Scanner` (its rig renders and triangulates).
     trajectory, plan : a trajectory file, or the number of views to plan (exactly one).
     joint_noise_rad : standard deviation of the reported joints' error (rad).
-    icp : also refine each view by ICP onto the scene's meshes.
+    icp : ``"views"`` (each view onto the merged cloud so far, no mesh needed),
+        ``"mesh"`` (each view onto the scene's meshes: an evaluation aid) or ``"none"``.
     seed : seed of the captures, the joint noise and the plan.
+    progress : called with one line per stage (planning, each view, merge, ICP, C2M).
     """
     from virtus.io.ply import write_ply
     from virtus.io.runs import claim_run
-    from virtus.pipeline.evaluate import evaluate_points, scene_meshes
+    from virtus.pipeline.evaluate import scene_meshes
     from virtus.pipeline.inputs import load_scene
 
     if (trajectory is None) == (plan is None):
@@ -164,6 +191,9 @@ def robot_scan(
         raise InputError("coverage_radius_m", "a radius in (0, 1] m", coverage_radius_m)
     if not 0.0 <= float(joint_noise_rad) <= MAX_JOINT_NOISE_RAD:
         raise InputError("--joint-noise", f"0 to {MAX_JOINT_NOISE_RAD} rad", joint_noise_rad)
+    if icp not in ICP_MODES:
+        raise InputError("--icp", " or ".join(ICP_MODES), icp)
+    say = _progress(progress)
     q_file = None if trajectory is None else load_trajectory(trajectory, setup)
     builtin = isinstance(scene, str) and scene == "freeform" and not Path(scene).is_file()
     if isinstance(scene, str | Path) and not builtin:
@@ -176,7 +206,7 @@ def robot_scan(
         "trajectory": None if q_file is None else q_file.tolist(),
         "plan": plan,
         "joint_noise_rad": float(joint_noise_rad),
-        "icp": bool(icp),
+        "icp": icp,
         "seed": int(seed),
         "coverage_radius_m": float(coverage_radius_m),
         "candidates": int(candidates),
@@ -194,41 +224,128 @@ def robot_scan(
 
         target = trimesh.util.concatenate([m for _, _, m in meshes])
         floor = _floor_mesh(scene)
+        say(f"planning: {'trajectory file' if q_file is not None else f'{plan} views'}")
         q_all, plan_record = _trajectory(
             run, setup, rig, target, floor, q_file, plan, candidates, coverage, seed
         )
+        say(f"planning: {len(q_all)} views")
+        reported = reported_joints(setup, q_all, float(joint_noise_rad), seed)
         views, clouds, views_record, measurable = _scan_views(
-            run, setup, scanner, scene, target, floor, q_all, joint_noise_rad, coverage, seed
+            run, setup, scanner, scene, (target, floor), q_all, reported, coverage, seed, say
         )
-        merged = np.concatenate(clouds)
+        merge = merge_views(setup, reported, clouds, meshes, icp=icp, seed=seed, progress=say)
         run.own(MERGED_PLY)
-        run.write(MERGED_PLY, lambda p: write_ply(p, merged, frame="world"))
-        c2m = evaluate_points(merged, meshes, register=False)
+        run.write(MERGED_PLY, lambda p: write_ply(p, merge.merged, frame="world"))
+        say("coverage")
         record = {
             "units": "m (poses), mm (C2M)",
             "views": views_record,
             "plan": plan_record,
             "joint_noise_rad": float(joint_noise_rad),
-            "c2m_kinematics": [e.to_dict() for e in c2m],
-            "coverage_kinematics": _coverage(target, merged, coverage_radius_m, seed, measurable),
+            "icp": icp,
+            **merge.record,
+            "coverage_kinematics": _coverage(
+                target, merge.merged, coverage_radius_m, seed, measurable
+            ),
         }
-        merged_icp = None
-        if icp:
-            refined = []
-            for cloud in clouds:
-                single = evaluate_points(cloud, meshes, register=True)
-                refined.append(single[0].c2m.cloud2mesh.apply(cloud))
-            merged_icp = np.concatenate(refined)
+        if merge.merged_icp is not None:
             run.own(MERGED_ICP_PLY)
-            run.write(MERGED_ICP_PLY, lambda p: write_ply(p, merged_icp, frame="world"))
-            after = evaluate_points(merged_icp, meshes, register=False)
-            record["c2m_icp"] = [e.to_dict() for e in after]
+            run.write(MERGED_ICP_PLY, lambda p: write_ply(p, merge.merged_icp, frame="world"))
             record["coverage_icp"] = _coverage(
-                target, merged_icp, coverage_radius_m, seed, measurable
+                target, merge.merged_icp, coverage_radius_m, seed, measurable
             )
         run.own(RESULT_JSON)
         run.write_json(RESULT_JSON, record, allow_nan=True)
-        return RobotScanResult(run.path, record, merged, merged_icp, views)
+        say(f"done: {run.path / RESULT_JSON}")
+        return RobotScanResult(run.path, record, merge.merged, merge.merged_icp, views, meshes)
+
+
+def _progress(progress: Callable[[str], None] | None) -> Callable[[str], None]:
+    """``progress`` with the seconds since the start in front of each line (or a no-op)."""
+    if progress is None:
+        return lambda _: None
+    start = time.perf_counter()
+    return lambda line: progress(f"[robot-scan {time.perf_counter() - start:7.1f} s] {line}")
+
+
+def reported_joints(setup: RobotSetup, q: np.ndarray, sigma: float, seed: int) -> np.ndarray:
+    """The joint values the arm reports at each view (V, dof): ``q`` plus one normal draw of
+    standard deviation ``sigma`` (rad) per joint and view, seeded, clipped to the limits."""
+    q = np.atleast_2d(np.asarray(q, dtype=np.float64))
+    return np.array([_noisy(setup, v, sigma, seed * 100_003 + k) for k, v in enumerate(q)])
+
+
+@dataclass
+class MergedViews:
+    """Outcome of :func:`merge_views`: the merged clouds (world, metres) and their record
+    (``c2m_kinematics``, and with ICP ``c2m_icp`` and the registration)."""
+
+    merged: np.ndarray
+    merged_icp: np.ndarray | None
+    record: dict[str, Any]
+
+
+def merge_views(
+    setup: RobotSetup,
+    reported: np.ndarray,
+    clouds: list[np.ndarray],
+    meshes: list[tuple[str, str, Any]],
+    *,
+    icp: str = "views",
+    anchor: str = "kinematics",
+    seed: int = 0,
+    progress: Callable[[str], None] | None = None,
+) -> MergedViews:
+    """Map each view's cloud (camera frame, metres) into the world by FK of its
+    ``reported`` joints, merge, optionally register (``icp``: see :func:`robot_scan`) and
+    measure C2M against ``meshes`` (world frame) before and after.
+
+    View-to-view ICP (:func:`virtus.robot.registration.register_views`) registers the
+    points inside the meshes' bounding box grown by :data:`REGION_MARGIN_M` (the working
+    volume the scan is planned for; the floor stays out); the meshes serve only that box
+    and the C2M measure. C2M measures the points of that box (at most :data:`C2M_POINTS`,
+    a sample seeded by ``seed``; ``record["c2m_sample"]``). ``anchor``: where the
+    registered cloud lies as a whole (:func:`~virtus.robot.registration.register_views`:
+    the kinematic average of the views, or the first view)."""
+    from virtus.pipeline.evaluate import evaluate_points
+
+    if icp not in ICP_MODES:
+        raise InputError("--icp", " or ".join(ICP_MODES), icp)
+    say = progress or (lambda _: None)
+    placed = [setup.cam2world(q).apply(c) for q, c in zip(reported, clouds, strict=True)]
+    merged = np.concatenate(placed)
+    low = np.min([m.bounds[0] for _, _, m in meshes], axis=0) - REGION_MARGIN_M
+    high = np.max([m.bounds[1] for _, _, m in meshes], axis=0) + REGION_MARGIN_M
+    near = np.flatnonzero(np.all((merged >= low) & (merged <= high), axis=1))
+    if len(near) > C2M_POINTS:  # the same points before and after the ICP
+        near = np.sort(np.random.default_rng([int(seed), 2105]).choice(near, C2M_POINTS, False))
+    say(f"merge: {len(merged):,} points from {len(placed)} views; C2M of {len(near):,} of "
+        f"them, kinematics alone")  # fmt: skip
+    record: dict[str, Any] = {
+        "c2m_sample": {"points_near_meshes": int(len(near)), "limit": C2M_POINTS},
+        "c2m_kinematics": [
+            e.to_dict() for e in evaluate_points(merged[near], meshes, register=False)
+        ],
+    }
+    if icp == "none":
+        return MergedViews(merged, None, record)
+    say(f"ICP ({icp})")
+    if icp == "views":
+        from virtus.robot.registration import register_views
+
+        registration = register_views(placed, region=(low, high), anchor=anchor, seed=seed)
+        refined = [c.apply(v) for c, v in zip(registration.corrections, placed, strict=True)]
+        record["registration"] = registration.to_dict()
+    else:
+        refined = []
+        for cloud in placed:
+            single = evaluate_points(cloud, meshes, register=True)
+            refined.append(single[0].c2m.cloud2mesh.apply(cloud))
+    merged_icp = np.concatenate(refined)
+    say("C2M after ICP")
+    after = evaluate_points(merged_icp[near], meshes, register=False)
+    record["c2m_icp"] = [e.to_dict() for e in after]
+    return MergedViews(merged, merged_icp, record)
 
 
 def _trajectory(run, setup, rig, target, floor, q_file, plan, candidates, coverage, seed):  # noqa: ANN001, ANN202
@@ -256,37 +373,40 @@ def _trajectory(run, setup, rig, target, floor, q_file, plan, candidates, covera
     return planned.q, record
 
 
-def _scan_views(run, setup, scanner, scene, target, floor, q_all, noise, coverage, seed):  # noqa: ANN001, ANN202
-    """Capture, decode and reconstruct each view (resumable); the clouds in the world by
-    FK of the reported joints; the surface samples some view measures."""
+def _scan_views(run, setup, scanner, scene, parts, q_all, reported, coverage, seed, say):  # noqa: ANN001, ANN202
+    """Capture, decode and reconstruct each view (resumable); each view's cloud in the camera
+    frame; the surface samples some view measures."""
     import trimesh
 
     from virtus.pipeline.scan import ScanSettings, scan_into
 
     rig = scanner.rig
+    target, floor = parts
     settings = ScanSettings(seed=int(seed))
     views, clouds, views_record = [], [], []
     samples, normals = surface_samples(target, COVERAGE_SAMPLES, seed)
     measurable = np.zeros(len(samples), dtype=bool)
+    # one ray index for the scene, built once; the robot's links apart (they move)
+    still = trimesh.util.concatenate([target, *([floor] if floor is not None else [])])
     for k, q in enumerate(q_all):
         sub = f"views/{k:03d}"
+        start = time.perf_counter()
         run.own(f"robot/view_{k:03d}.stl")
         full = scene_with_robot(scene, setup, q, run.file("robot"), f"view_{k:03d}.stl")
-        reported = _noisy(setup, q, float(noise), seed * 100_003 + k)
         record = setup.capture_record(q)
-        record["q_reported"] = reported.tolist()
+        record["q_reported"] = reported[k].tolist()
         result = scan_into(run, sub, full, _RobotScanner(scanner, record), rig, settings,
                            cam2world=setup.cam2world(q))  # fmt: skip
-        occluders = trimesh.util.concatenate(
-            [target, *([floor] if floor is not None else []), *setup.scene_meshes(q)]
-        )
-        measurable |= view_coverage(rig, setup.cam2world(q), samples, normals, occluders,
+        links = trimesh.util.concatenate(setup.scene_meshes(q))
+        measurable |= view_coverage(rig, setup.cam2world(q), samples, normals, [still, links],
                                     coverage)  # fmt: skip
-        cloud = setup.cam2world(reported).apply(result.reconstruction.cloud())
+        cloud = result.reconstruction.cloud()
         views.append(result)
         clouds.append(cloud)
-        views_record.append({"view": sub, "q": record["q"], "q_reported": reported.tolist(),
+        views_record.append({"view": sub, "q": record["q"], "q_reported": reported[k].tolist(),
                              "points": int(len(cloud))})  # fmt: skip
+        seconds = time.perf_counter() - start
+        say(f"view {k + 1}/{len(q_all)}: {len(cloud):,} points, {seconds:.1f} s")
     return views, clouds, views_record, measurable
 
 
@@ -331,7 +451,12 @@ def _coverage(
     from scipy.spatial import cKDTree
 
     points, _ = surface_samples(target, COVERAGE_SAMPLES, seed)
-    distance, _ = cKDTree(cloud).query(points, k=1, distance_upper_bound=radius_m)
+    # only points within radius_m of the target's box can be within radius_m of a sample
+    low, high = target.bounds[0] - radius_m, target.bounds[1] + radius_m
+    near = cloud[np.all((cloud >= low) & (cloud <= high), axis=1)]
+    if not len(near):
+        near = np.full((1, 3), np.inf)
+    distance, _ = cKDTree(near).query(points, k=1, distance_upper_bound=radius_m)
     hit = np.isfinite(distance)
     return {
         "radius_mm": radius_m * 1e3,
