@@ -204,3 +204,48 @@ def test_order_consistency_leaves_depth_edges_and_unrelated_points_alone() -> No
     random = TWO_PI * np.random.default_rng(1).uniform(0, 900, (50, 60)) / 18.0
     flagged, _ = phase.order_consistency(random, phase.wrap(random), np.ones((50, 60), bool))
     assert not flagged.any()
+
+
+def _wrapped_phase_direct(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The N-step formulas written out on a float64 copy of the whole stack: the reference
+    for :func:`phase.wrapped_phase`'s blocked evaluation."""
+    stack = np.asarray(frames, dtype=np.float64)
+    steps = len(stack)
+    shifts = TWO_PI * np.arange(1, steps + 1) / steps
+    c = np.tensordot(np.cos(shifts), stack, axes=1)
+    s = np.tensordot(np.sin(shifts), stack, axes=1)
+    return np.arctan2(-s, c), stack.mean(axis=0), (2.0 / steps) * np.hypot(c, s)
+
+
+@pytest.mark.parametrize(
+    ("steps", "dtype", "shape"),
+    [
+        (3, np.float32, (37, 41)),
+        (4, np.uint16, (128, 129)),  # just over one block of pixels
+        (5, np.float64, (128, 128)),  # exactly one block
+        (8, np.uint8, (300, 71)),
+        (18, np.float32, (2, 70, 130)),  # extra leading axes
+    ],
+)
+def test_wrapped_phase_blocks_equal_the_formulas_on_the_whole_stack(
+    steps: int, dtype: type, shape: tuple[int, ...]
+) -> None:
+    rng = np.random.default_rng(steps)
+    phi = rng.uniform(-np.pi, np.pi, shape)
+    # B >= 5: where B -> 0 the phase itself is undefined and rounding can move it anywhere.
+    frames = phase_frames(phi, rng.uniform(60, 120, shape), rng.uniform(5, 60, shape), steps)
+    frames = frames.astype(dtype)
+    got = phase.wrapped_phase(frames)
+    expected = _wrapped_phase_direct(frames)
+    for value in got:
+        assert value.dtype == np.float64 and value.shape == shape
+    # Float rounding only: the blocked sums are the same products in another order.
+    assert_phase_equal(got[0], expected[0], tol.FLOAT64_EXACT)
+    np.testing.assert_allclose(got[1], expected[1], rtol=1e-13, atol=0)
+    np.testing.assert_allclose(got[2], expected[2], rtol=1e-9, atol=1e-10)
+    assert np.all(got[0] >= -np.pi) and np.all(got[0] < np.pi)
+
+
+def test_wrapped_phase_of_no_pixels_is_empty() -> None:
+    for value in phase.wrapped_phase(np.zeros((4, 0, 3), dtype=np.uint16)):
+        assert value.shape == (0, 3) and value.dtype == np.float64

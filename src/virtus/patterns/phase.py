@@ -71,6 +71,10 @@ def wrap(phase: np.ndarray) -> np.ndarray:
     return np.where(wrapped < -np.pi, wrapped + TWO_PI, wrapped)
 
 
+#: Pixels per block of :func:`wrapped_phase` (its float64 frames and sums stay in cache).
+_PHASE_BLOCK = 16384
+
+
 def wrapped_phase(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Least-squares N-step phase shifting.
 
@@ -94,15 +98,31 @@ def wrapped_phase(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
         raise InputError("frames", "a real numeric array", f"dtype {stack.dtype}")
     steps = stack.shape[0]
     shifts = TWO_PI * np.arange(1, steps + 1) / steps
-    # One matrix product gives sum I_n, sum I_n cos d_n and sum I_n sin d_n for every pixel.
-    weights = np.stack([np.ones(steps), np.cos(shifts), np.sin(shifts)])
-    flat = stack.reshape(steps, -1).astype(np.float64, copy=False)
-    sums = weights @ flat
+    # One matrix product gives sum I_n, sum I_n cos d_n and sum I_n sin d_n for every pixel;
+    # the rows are scaled so that it gives A, (B cos phi) and (B sin phi) directly:
     # sum I_n cos d_n = (N B / 2) cos phi and sum I_n sin d_n = -(N B / 2) sin phi.
-    phase = np.arctan2(-sums[2], sums[1])  # in [-pi, pi]
+    weights = np.stack([np.ones(steps) / steps, np.cos(shifts), -np.sin(shifts)])
+    weights[1:] *= 2.0 / steps
+    flat = stack.reshape(steps, -1)
+    size = flat.shape[1]
+    phase, background, modulation = np.empty(size), np.empty(size), np.empty(size)
+    # Pixels in blocks that stay in cache: one float64 copy of a block of frames (not of
+    # the stack) and the three sums, written straight into the outputs.
+    block = max(1, min(size, _PHASE_BLOCK))
+    frames64 = None if flat.dtype == np.float64 else np.empty((steps, block))
+    sums = np.empty((3, block))
+    for start in range(0, size, block):
+        stop = min(start + block, size)
+        part = flat[:, start:stop]
+        if frames64 is not None:
+            part = frames64[:, : stop - start]
+            np.copyto(part, flat[:, start:stop], casting="unsafe")
+        out = sums[:, : stop - start]
+        np.matmul(weights, part, out=out)
+        background[start:stop] = out[0]
+        np.arctan2(out[2], out[1], out=phase[start:stop])  # in [-pi, pi]
+        np.hypot(out[1], out[2], out=modulation[start:stop])
     phase[phase >= np.pi] -= TWO_PI  # +pi belongs to [-pi, pi) as -pi
-    background = sums[0] / steps
-    modulation = (2.0 / steps) * np.hypot(sums[1], sums[2])
     shape = stack.shape[1:]
     return phase.reshape(shape), background.reshape(shape), modulation.reshape(shape)
 
