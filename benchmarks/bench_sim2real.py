@@ -84,19 +84,15 @@ def _bin(frame: np.ndarray, factor: int) -> np.ndarray:
 
 
 def _circles(capture, factor: int) -> np.ndarray:
-    """The board's white circles (white - black above mid-level, blobs of the median area),
-    eroded off their blurred edges: the one-albedo pixels the light is fitted on."""
+    """The board's white circles (``bench_twin_real.white_circles``), eroded off their
+    blurred edges: the one-albedo pixels the light is fitted on."""
     from scipy import ndimage
 
-    kinds = [frame.kind for frame in capture.sequence.frames]
-    signal = capture.frames[kinds.index("white")].astype(np.float64)
-    signal -= capture.frames[kinds.index("black")]
-    threshold = 0.5 * (np.percentile(signal, 10) + np.percentile(signal, 99.5))
-    labels, count = ndimage.label(signal > threshold)
-    areas = ndimage.sum_labels(np.ones_like(signal), labels, np.arange(1, count + 1))
-    median = np.median(areas[areas > 100 / factor**2])
-    keep = np.flatnonzero((areas > 0.5 * median) & (areas < 2.0 * median)) + 1
-    return ndimage.binary_erosion(np.isin(labels, keep), iterations=max(1, 5 // factor))
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_twin_real import white_circles
+
+    circles, _ = white_circles(capture, factor)
+    return ndimage.binary_erosion(circles, iterations=max(1, 5 // factor))
 
 
 def _write_yaml(path: Path, data: dict, what: str) -> None:

@@ -101,10 +101,10 @@ def ndimage_circles(capture) -> np.ndarray:
     return ndimage.binary_dilation(inner, iterations=5)
 
 
-def circles_and_levels(capture) -> tuple[np.ndarray, float]:
-    """The board's white circles (blobs of the white - black frame, eroded 5 px off their
-    blurred edges: one albedo, for the fit) and the board's background over its circles
-    (the twin board's printed contrast, measured: the spec's white-on-black default is 0.25)."""
+def white_circles(capture, factor: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """The board's white circles in a capture binned by ``factor`` (blobs of the white -
+    black frame above mid-level, of the median area; edges not eroded) and that white -
+    black frame (float64). Also ``bench_sim2real``'s fitting region."""
     from scipy import ndimage
 
     kinds = [frame.kind for frame in capture.sequence.frames]
@@ -113,9 +113,18 @@ def circles_and_levels(capture) -> tuple[np.ndarray, float]:
     threshold = 0.5 * (np.percentile(signal, 10) + np.percentile(signal, 99.5))
     labels, count = ndimage.label(signal > threshold)
     areas = ndimage.sum_labels(np.ones_like(signal), labels, np.arange(1, count + 1))
-    median = np.median(areas[areas > 100])
+    median = np.median(areas[areas > 100 / factor**2])
     keep = np.flatnonzero((areas > 0.5 * median) & (areas < 2.0 * median)) + 1
-    circles = np.isin(labels, keep)
+    return np.isin(labels, keep), signal
+
+
+def circles_and_levels(capture) -> tuple[np.ndarray, float]:
+    """The board's white circles (:func:`white_circles`, eroded 5 px off their blurred edges:
+    one albedo, for the fit) and the board's background over its circles (the twin board's
+    printed contrast, measured: the spec's white-on-black default is 0.25)."""
+    from scipy import ndimage
+
+    circles, signal = white_circles(capture)
     inner = ndimage.binary_erosion(circles, iterations=5)
     rows, cols = np.nonzero(circles)
     box = np.zeros_like(circles)

@@ -30,21 +30,21 @@ import argparse
 import json
 import os
 import platform
+import sys
 import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
 from virtus.design import monte_carlo, run_design
 from virtus.design.montecarlo import DEFAULT_DRAWS, p95_sampling_inflation
-from virtus.geometry.devices import Camera, Rig, default_rig
-from virtus.geometry.optics import Intrinsics
-from virtus.geometry.transforms import Pose
 from virtus.patterns import build_sequence
 from virtus.render.settings import RenderSettings
 from virtus.scanner import Scanner
-from virtus.scene.model import Material, PlaneObject, Scene, SphereObject
 from virtus.sensor import SENSOR_PRESETS, Sensor
+
+ROOT = Path(__file__).resolve().parents[1]
 
 SENSORS = {
     "ideal12": Sensor(name="ideal12", bit_depth=12, system_gain_dn_per_e=4095 / 20000),
@@ -53,26 +53,10 @@ SENSORS = {
 }
 
 
-def scenes() -> dict[str, Scene]:
-    matte = Material(albedo=0.8, specular=0.0)
-    tilted = Pose.from_euler("xyz", [20.0, -25.0, 0.0], t=(0, 0, 1.0))
-    return {
-        "plane": Scene(objects=[], background=PlaneObject((1.0, 1.0), tilted, matte)),
-        "sphere": Scene(
-            objects=[SphereObject(0.012, (0.0, 0.0, 1.0), matte)],
-            background=PlaneObject((2.0, 2.0), Pose(np.eye(3), (0.0, 0.0, 1.3)), matte),
-        ),
-    }
-
-
-def cropped_rig(size: int) -> Rig:
-    rig = default_rig()
-    k = rig.camera.intrinsics
-    camera = Intrinsics(k.fx, k.fy, (size - 1) / 2, (size - 1) / 2, size, size)
-    return Rig(Camera(camera), rig.projector, rig.proj2cam)
-
-
 def model_vs_monte_carlo(draws: int, size: int) -> list[dict]:
+    sys.path.insert(0, str(ROOT))  # the test suite's scenes and rig: the same cases
+    from tests.support import cropped_rig, uncertainty_scenes
+
     rows = []
     rig = cropped_rig(size)
     header = f"{'scene':<7}{'sensor':<9}{'N':>3}{'T':>4}  " + " ".join(
@@ -83,7 +67,7 @@ def model_vs_monte_carlo(draws: int, size: int) -> list[dict]:
         f"{p95_sampling_inflation(draws):.3f} on a constant sigma ({draws} draws)"
     )
     print(header + f"{'ok':>5}{'orders':>8}")
-    for scene_name, scene in scenes().items():
+    for scene_name, scene in uncertainty_scenes().items():
         for sensor_name, sensor in SENSORS.items():
             for steps in (3, 4, 18):
                 for period in (18.0, 36.0):

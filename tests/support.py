@@ -39,6 +39,22 @@ def sphere_and_plane(material: Material = LAMBERT) -> Scene:
     )
 
 
+def uncertainty_scenes() -> dict[str, Scene]:
+    """The scenes the uncertainty model is checked against Monte Carlo on (test and bench):
+    a matte tilted plane, and a matte 24 mm sphere before a plane; at 1 m the sphere fills
+    most of a 48 px cropped camera's (21 mm) field, so its shading and slope spread sigma
+    over the pixels."""
+    matte = Material(albedo=0.8, specular=0.0)
+    tilted = Pose.from_euler("xyz", [20.0, -25.0, 0.0], t=(0, 0, 1.0))
+    return {
+        "plane": Scene(objects=[], background=PlaneObject((1.0, 1.0), tilted, matte)),
+        "sphere": Scene(
+            objects=[SphereObject(0.012, (0.0, 0.0, 1.0), matte)],
+            background=PlaneObject((2.0, 2.0), Pose(np.eye(3), (0.0, 0.0, 1.3)), matte),
+        ),
+    }
+
+
 def tilted_plane() -> PlaneObject:
     """A 1 m x 1 m plane through (0, 0, 1) m, tilted 20 deg about x and -25 deg about y."""
     return PlaneObject((1.0, 1.0), Pose.from_euler("xyz", [20.0, -25.0, 0.0], t=(0, 0, 1.0)))

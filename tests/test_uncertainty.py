@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.support import cropped_rig, uncertainty_scenes
 from tests.tolerances import (
     EMVA_VARIANCE_VS_DRAWS,
     FLOAT64_EXACT,
@@ -225,33 +226,6 @@ def test_predict_uncertainty_checks_its_maps():
 DRAWS = MODEL_VS_MC_DRAWS
 
 
-def _mc_scenes():
-    from virtus.scene.model import Material, PlaneObject, Scene, SphereObject
-
-    matte = Material(albedo=0.8, specular=0.0)
-    tilted = Pose.from_euler("xyz", [20.0, -25.0, 0.0], t=(0, 0, 1.0))
-    return {
-        "plane": Scene(objects=[], background=PlaneObject((1.0, 1.0), tilted, matte)),
-        # a 24 mm sphere fills most of the 48 px (21 mm) field at 1 m: its shading and
-        # slope spread sigma over the pixels
-        "sphere": Scene(
-            objects=[SphereObject(0.012, (0.0, 0.0, 1.0), matte)],
-            background=PlaneObject((2.0, 2.0), Pose(np.eye(3), (0.0, 0.0, 1.3)), matte),
-        ),
-    }
-
-
-def _mc_rig(size: int = 48) -> Rig:
-    """The paper's rig with its camera cropped to ``size`` px: the paper's pixel footprint
-    (0.8 projector px at 1 m, so a pixel barely averages the fringes), few pixels."""
-    from virtus.geometry.devices import default_rig
-
-    rig = default_rig()
-    k = rig.camera.intrinsics
-    camera = Intrinsics(k.fx, k.fy, (size - 1) / 2, (size - 1) / 2, size, size)
-    return Rig(Camera(camera), rig.projector, rig.proj2cam)
-
-
 def run_case(scene, sensor, steps, period, draws=DRAWS, use="u"):
     """:func:`virtus.design.montecarlo.monte_carlo` of the 48 px scanner with ``steps`` x
     ``period`` phase shifting and a 7-bit Gray code."""
@@ -262,7 +236,9 @@ def run_case(scene, sensor, steps, period, draws=DRAWS, use="u"):
     directions = ("v",) if use == "u" else ("v", "h")
     sequence = build_sequence(912, 1140, periods=period, steps=steps, gray_bits=7,
                               directions=directions)  # fmt: skip
-    scanner = Scanner(rig=_mc_rig(), sequence=sequence, sensor=sensor,
+    # the paper's pixel footprint (0.8 projector px at 1 m, so a pixel barely averages the
+    # fringes), few pixels
+    scanner = Scanner(rig=cropped_rig(48), sequence=sequence, sensor=sensor,
                       render=RenderSettings(spp=4))  # fmt: skip
     return monte_carlo(scanner, scene, draws, use=use)
 
@@ -288,7 +264,7 @@ def test_the_draws_leave_the_raw_95th_percentile_little_sampling_inflation():
 
 @pytest.fixture(scope="module")
 def scenes():
-    return _mc_scenes()
+    return uncertainty_scenes()
 
 
 # CI subset of the issue's matrix (the whole matrix: benchmarks/bench_uncertainty.py): both

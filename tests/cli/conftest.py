@@ -25,3 +25,21 @@ def tiny(tmp_path_factory):
     sequence = json.loads((cap / "capture.json").read_text())["sequence"]
     (root / "seq.json").write_text(json.dumps(sequence))
     return root
+
+
+@pytest.fixture
+def emitted(monkeypatch) -> list:
+    """The plain data of every summary the CLI emits during the test, in order (the table
+    is printed 400 columns wide, so that no cell wraps and paths stay whole)."""
+    from virtus.cli import output as printing
+
+    monkeypatch.setenv("COLUMNS", "400")
+    seen = []
+    emit = printing.Output.emit
+
+    def spy(self, summary):  # noqa: ANN001, ANN202
+        seen.append(printing.plain(summary.data))
+        return emit(self, summary)
+
+    monkeypatch.setattr(printing.Output, "emit", spy)
+    return seen

@@ -89,19 +89,9 @@ def test_a_realistic_demo_runs_the_ideal_reference_beside_it(experiments, tmp_pa
     assert summary["sphere"]["fit_rms_mm"] == pytest.approx(0.3764)
 
 
-def test_the_demo_table_shows_the_numbers_of_its_json(experiments, tmp_path, monkeypatch,
+def test_the_demo_table_shows_the_numbers_of_its_json(experiments, tmp_path, emitted,
                                                       capsys) -> None:  # fmt: skip
-    from virtus.cli import output as printing
-
-    monkeypatch.setenv("COLUMNS", "400")
-    seen = []
-    emit = printing.Output.emit
-
-    def spy(self, summary):  # noqa: ANN001, ANN202
-        seen.append(printing.plain(summary.data))
-        return emit(self, summary)
-
-    monkeypatch.setattr(printing.Output, "emit", spy)
+    seen = emitted
     out, err = _demo(["--out", str(tmp_path / "d"), "--sensor", "imx174"], capsys)
     assert "ideal sensor" in out and "0.3764" in out and "0.2764" in out
     assert_table_numbers_in_json(out, seen[-1])

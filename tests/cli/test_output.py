@@ -140,18 +140,8 @@ SUMMARIES = {
 
 
 @pytest.mark.parametrize("name", list(SUMMARIES))
-def test_json_carries_the_numbers_the_table_shows(name, tiny, tmp_path, monkeypatch, capsys):
-    from virtus.cli import output as printing
-
-    monkeypatch.setenv("COLUMNS", "400")  # no wrapped cells: paths stay whole
-    seen = []
-    emit = printing.Output.emit
-
-    def spy(self, summary):  # noqa: ANN001, ANN202
-        seen.append(printing.plain(summary.data))
-        return emit(self, summary)
-
-    monkeypatch.setattr(printing.Output, "emit", spy)
+def test_json_carries_the_numbers_the_table_shows(name, tiny, tmp_path, emitted, capsys):
+    seen = emitted
     values = {"r": str(tiny / "rig.json"), "t": str(tiny)}
     for mode, flags in (("text", []), ("json", ["--json"])):
         work = tmp_path / mode
@@ -245,20 +235,10 @@ FAKED = {
 
 @pytest.mark.parametrize("name", list(FAKED))
 def test_json_carries_the_numbers_the_table_shows_of_faked_jobs(name, tmp_path, monkeypatch,
-                                                                 capsys):  # fmt: skip
-    from virtus.cli import output as printing
-
+                                                                 emitted, capsys):  # fmt: skip
     argv, fake = FAKED[name]
     fake(monkeypatch)
-    monkeypatch.setenv("COLUMNS", "400")
-    seen = []
-    emit = printing.Output.emit
-
-    def spy(self, summary):  # noqa: ANN001, ANN202
-        seen.append(printing.plain(summary.data))
-        return emit(self, summary)
-
-    monkeypatch.setattr(printing.Output, "emit", spy)
+    seen = emitted
     for flags in ([], ["--json"]):
         with pytest.raises(SystemExit) as exit_info:
             main([a.format(w=tmp_path) for a in argv] + flags)

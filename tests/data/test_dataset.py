@@ -71,6 +71,18 @@ def tiny_config(folder: Path, name: str = "config.yaml", **changes) -> Path:
     return path
 
 
+def vertical_store(folder: Path, num_samples: int, splits: dict[str, float]) -> Path:
+    """Generate ``folder/store``: a tiny store of spheres before one plane, vertical Gray +
+    4-step fringes only (the learn and report tests' training store); returns its path."""
+    config = tiny_config(
+        folder, num_samples=num_samples, splits=splits,
+        fringes={"codings": ["gray"], "steps": [4], "periods": [16], "directions": ["v"]},
+        planes={"count": [1, 1]},
+    )  # fmt: skip
+    generate(load_config(config), folder / "store")
+    return folder / "store"
+
+
 def store_files(path: Path) -> dict[str, str]:
     """Relative path -> sha256 of every file of a store (the lock file aside)."""
     return {

@@ -85,6 +85,17 @@ def test_ideal_sensor_true_rig_sizes_within_10_um(tmp_path):
     assert result.summary["maxima"]["P_S"]["n"] == 2
 
 
+def _first_sphere_fit(scanner):  # noqa: ANN001, ANN202
+    """The one-position acceptance test's sphere, its decoded capture and its fit,
+    recomputed as the job does (the same capture seed, decoding, interior mask and fit)."""
+    _, layout = artefact_layout(volume_from_rig(scanner.rig), positions=1)
+    sphere = layout[0]
+    capture = scanner.capture(sphere.scene(), rng=_position_seed(0, sphere.name))
+    decoded = capture.decode()
+    points = reconstruct(scanner.rig, decoded.proj_uv, interior(decoded.mask)).points
+    return sphere, decoded, measure_sphere(points, sphere.centres_m[0], sphere.radius_m)
+
+
 def test_dmd_staircase_bounds_the_form_error(dmd_run):
     """With sharp DMD pixels P_F stays below the staircase's bound (half a projector pixel in
     u_p and v_p through the triangulation's Jacobian, figures.staircase_form_bound) and
@@ -92,12 +103,7 @@ def test_dmd_staircase_bounds_the_form_error(dmd_run):
     scanner, result = dmd_run
     data = result.summary["positions"][0]
     assert data["name"] == "sphere_01"
-    _, layout = artefact_layout(volume_from_rig(scanner.rig), positions=1)
-    sphere = layout[0]
-    capture = scanner.capture(sphere.scene(), rng=_position_seed(0, sphere.name))
-    decoded = capture.decode()
-    points = reconstruct(scanner.rig, decoded.proj_uv, interior(decoded.mask)).points
-    fit = measure_sphere(points, sphere.centres_m[0], sphere.radius_m)
+    sphere, _, fit = _first_sphere_fit(scanner)
     assert 1e3 * fit.form_m == data["P_F_mm"]  # the job's number, recomputed
     fit_error = np.linalg.norm(fit.centre_m - sphere.centres_m[0]) + abs(
         fit.diameter_m / 2 - sphere.radius_m
@@ -122,12 +128,7 @@ def test_noise_form_error_follows_the_sensor_model(tmp_path):
     scanner = _scanner(0.25, "bilinear", sensor)
     result = acceptance_test(scanner, tmp_path, calibration="true", positions=1)
     measured = result.summary["positions"][0]["P_F_mm"] / 1e3
-    _, layout = artefact_layout(volume_from_rig(scanner.rig), positions=1)
-    sphere = layout[0]
-    capture = scanner.capture(sphere.scene(), rng=_position_seed(0, sphere.name))
-    decoded = capture.decode()
-    points = reconstruct(scanner.rig, decoded.proj_uv, interior(decoded.mask)).points
-    fit = measure_sphere(points, sphere.centres_m[0], sphere.radius_m)
+    sphere, decoded, fit = _first_sphere_fit(scanner)
     rows, cols = fit.pixels.T
     cam_px = fit.pixels[:, ::-1].astype(float)
     sigma_uv = coordinate_sigma_px(sensor, scanner.sequence, decoded, fit.pixels)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.data.test_dataset import tiny_config, tiny_rig
+from tests.data.test_dataset import tiny_config, tiny_rig, vertical_store
 from virtus.data import generate, load_config
 
 try:  # one intra-op thread: the tiny networks gain nothing from more, and on a shared
@@ -24,14 +24,8 @@ TINY_NET = {"base_channels": 4, "levels": 2, "batch_size": 2, "lr": 1e-3}
 @pytest.fixture(scope="session")
 def learn_store(tmp_path_factory) -> Path:
     """12 samples of a sphere before a plane, vertical fringes only; train/val/test by object."""
-    folder = tmp_path_factory.mktemp("learn-store")
-    config = tiny_config(
-        folder, num_samples=12, splits={"train": 0.6, "val": 0.2, "test": 0.2},
-        fringes={"codings": ["gray"], "steps": [4], "periods": [16], "directions": ["v"]},
-        planes={"count": [1, 1]},
-    )  # fmt: skip
-    generate(load_config(config), folder / "store")
-    return folder / "store"
+    splits = {"train": 0.6, "val": 0.2, "test": 0.2}
+    return vertical_store(tmp_path_factory.mktemp("learn-store"), 12, splits)
 
 
 @pytest.fixture(scope="session")

@@ -144,17 +144,10 @@ def robot_scan_run(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def learn_store_small(tmp_path_factory) -> Path:
     """Six samples (64 x 48 px), vertical fringes, train/val/test."""
-    from tests.data.test_dataset import tiny_config
-    from virtus.data import generate, load_config
+    from tests.data.test_dataset import vertical_store
 
-    folder = tmp_path_factory.mktemp("learn")
-    config = tiny_config(
-        folder, num_samples=6, splits={"train": 0.5, "val": 0.17, "test": 0.33},
-        fringes={"codings": ["gray"], "steps": [4], "periods": [16], "directions": ["v"]},
-        planes={"count": [1, 1]},
-    )  # fmt: skip
-    generate(load_config(config), folder / "store")
-    return folder / "store"
+    splits = {"train": 0.5, "val": 0.17, "test": 0.33}
+    return vertical_store(tmp_path_factory.mktemp("learn"), 6, splits)
 
 
 @pytest.fixture(scope="session")

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from tests.report.conftest import copy_run
-from tests.report.test_runs import _refused
+from tests.report.test_runs import _mark_running, _refused
 from virtus.report import build_page, write_report
 from virtus.report.html import format_value
 
@@ -64,7 +64,5 @@ def test_design_shows_the_sweeps_figures_and_table(design_run, tmp_path) -> None
 @pytest.mark.parametrize("fixture", ["acceptance_run", "predict_run", "design_run"])
 def test_half_finished_design_runs_are_refused(fixture, request, tmp_path, capsys) -> None:
     run = copy_run(request.getfixturevalue(fixture), tmp_path)
-    record = json.loads((run / "run.json").read_text())
-    record["status"] = "running"
-    (run / "run.json").write_text(json.dumps(record))
-    assert f"half-finished `virtus {record['command']}` run" in _refused(run, capsys)
+    command = _mark_running(run)
+    assert f"half-finished `virtus {command}` run" in _refused(run, capsys)

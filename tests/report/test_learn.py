@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tests.report.conftest import copy_run
-from tests.report.test_runs import _refused
+from tests.report.test_runs import _mark_running, _refused
 from virtus.report import build_page
 
 pytest.importorskip("torch")
@@ -46,7 +46,5 @@ def test_a_run_without_evaluations_says_how_to_make_one(learn_run, tmp_path) -> 
 
 def test_a_half_finished_training_is_refused(learn_run, tmp_path, capsys) -> None:
     run = copy_run(learn_run, tmp_path)
-    record = json.loads((run / "run.json").read_text())
-    record["status"] = "running"
-    (run / "run.json").write_text(json.dumps(record))
+    _mark_running(run)
     assert "half-finished `virtus learn train` run" in _refused(run, capsys)

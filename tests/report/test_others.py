@@ -8,7 +8,7 @@ import json
 import numpy as np
 
 from tests.report.conftest import copy_run
-from tests.report.test_runs import _refused
+from tests.report.test_runs import _mark_running, _refused
 from virtus.report import build_page
 
 
@@ -39,7 +39,5 @@ def test_a_validation_without_maps_gets_a_note(twin_run, tmp_path) -> None:
 
 def test_a_half_finished_twin_is_refused(twin_run, tmp_path, capsys) -> None:
     run = copy_run(twin_run, tmp_path)
-    record = json.loads((run / "run.json").read_text())
-    record["status"] = "running"
-    (run / "run.json").write_text(json.dumps(record))
+    _mark_running(run)
     assert "half-finished `virtus twin` run (status running)" in _refused(run, capsys)

@@ -14,6 +14,15 @@ from virtus.cli import main
 from virtus.report import KINDS, check_run
 
 
+def _mark_running(run_dir: Path) -> str:
+    """Turn ``run_dir`` into a half-finished run (its record's status "running"); returns the
+    run's command."""
+    record = json.loads((run_dir / "run.json").read_text())
+    record["status"] = "running"
+    (run_dir / "run.json").write_text(json.dumps(record))
+    return record["command"]
+
+
 def _refused(run_dir: Path, capsys, out: Path | None = None) -> str:
     """Run ``virtus report``; assert exit 2, one line on stderr, no report written."""
     argv = ["report", str(run_dir)] + (["--out", str(out)] if out else [])
@@ -47,9 +56,7 @@ def test_a_missing_directory(tmp_path, capsys) -> None:
 
 
 def test_a_half_finished_run(scan_copy, capsys) -> None:
-    record = json.loads((scan_copy / "run.json").read_text())
-    record["status"] = "running"
-    (scan_copy / "run.json").write_text(json.dumps(record))
+    _mark_running(scan_copy)
     line = _refused(scan_copy, capsys)
     assert "half-finished `virtus scan` run (status running)" in line
 

@@ -13,7 +13,7 @@ from virtus.capture.capture import Capture
 from virtus.errors import InputError
 from virtus.render import RenderSettings
 from virtus.robot.config import load_robot_file
-from virtus.robot.scan import robot_scan
+from virtus.robot.scan import RobotScanResult, robot_scan
 from virtus.scanner import Scanner
 from virtus.sensor.projector import Lookup, ProjectorModel
 
@@ -32,23 +32,18 @@ def tiny_scanner() -> Scanner:
     )
 
 
+def scan_two_views(out: Path, **changes) -> RobotScanResult:
+    """The ``scanned`` fixture's robot scan into ``out`` (two planned views of the example
+    robot, joint noise 1e-4 rad, ICP on the views); ``changes`` replace its arguments."""
+    kwargs = {"scanner": tiny_scanner(), "plan": 2, "candidates": 8, "joint_noise_rad": 1e-4,
+              "icp": "views", "seed": 1, "coverage_radius_m": RADIUS_M}  # fmt: skip
+    return robot_scan(load_robot_file(EXAMPLE), "freeform", out, **(kwargs | changes))
+
+
 @pytest.fixture(scope="module")
 def scanned(tmp_path_factory) -> tuple[Path, object]:
     out = tmp_path_factory.mktemp("robot") / "scan"
-    setup = load_robot_file(EXAMPLE)
-    result = robot_scan(
-        setup,
-        "freeform",
-        out,
-        scanner=tiny_scanner(),
-        plan=2,
-        candidates=8,
-        joint_noise_rad=1e-4,
-        icp="views",
-        seed=1,
-        coverage_radius_m=RADIUS_M,
-    )
-    return out, result
+    return out, scan_two_views(out)
 
 
 def test_views_record_the_robot_and_merge_in_the_world(scanned) -> None:
@@ -78,36 +73,12 @@ def test_resume_keeps_the_views_and_other_settings_are_refused(scanned) -> None:
     from virtus.errors import RunConflict
 
     out, first = scanned
-    setup = load_robot_file(EXAMPLE)
     stamp = (out / "views" / "000" / "capture.json").stat().st_mtime_ns
-    again = robot_scan(
-        setup,
-        "freeform",
-        out,
-        scanner=tiny_scanner(),
-        plan=2,
-        candidates=8,
-        joint_noise_rad=1e-4,
-        icp="views",
-        seed=1,
-        resume=True,
-        coverage_radius_m=RADIUS_M,
-    )
+    again = scan_two_views(out, resume=True)
     assert (out / "views" / "000" / "capture.json").stat().st_mtime_ns == stamp
     np.testing.assert_array_equal(again.merged, first.merged)
     with pytest.raises(RunConflict):
-        robot_scan(
-            setup,
-            "freeform",
-            out,
-            scanner=tiny_scanner(),
-            plan=2,
-            candidates=8,
-            joint_noise_rad=2e-4,
-            icp="views",
-            seed=1,
-            resume=True,
-        )
+        scan_two_views(out, joint_noise_rad=2e-4, resume=True)
 
 
 def test_bad_arguments_are_refused_before_anything_is_written(tmp_path: Path) -> None:

@@ -437,26 +437,8 @@ def local_homographies_per_circle(
     then a least-squares fit of its inliers): the reference that the batched fit is tested
     and benchmarked against (``benchmarks/bench_calibrate.py``).
 
-    Parameters
-    ----------
-    proj_uv : (H, W, 2) float, decoded projector coordinates (u_p, v_p) per camera pixel,
-        NaN where invalid.
-    board : the board (sets the neighbourhood: the circle and the ring around it, as
-        :func:`virtus.calib.detect.refine_centres`).
-    cam_centres : (N, 2) float64 approximate camera pixels (u, v) of the circle centres,
-        board order; they place the neighbourhoods.
-    stripe : width (projector px) of the stripes that ``proj_uv`` holds the centres of,
-        for coordinates decoded from a code alone (``DecodeResult.stripe_v``/``_h``; 1 for
-        OpenCV's Gray code, whose integer columns and rows the fit averages to sub-pixel
-        points like a phase map's staircase; it sets the RANSAC threshold and the wider
-        neighbourhoods of :func:`projector_window_radii`); None for phase.
-
-    Returns
-    -------
-    (N, 3, 3) float64 homographies mapping homogeneous camera pixels (u, v, 1) to projector
-    pixels; all-NaN for a circle with too few valid decoded pixels around it. Keeping the
-    homographies (not the maps) lets the caller evaluate them at bias-corrected centres
-    later, after the camera is calibrated.
+    Parameters and the result are those of :func:`local_homographies` (the same
+    neighbourhoods, threshold and minimum counts of valid pixels and of inliers).
     """
     uv, anchors, threshold, H = _window_inputs(proj_uv, board, cam_centres, stripe)  # noqa: N806
     obj = board.object_points[:, :2]

@@ -10,6 +10,7 @@ import typer
 
 from virtus.cli.options import (
     OverwriteOption,
+    ResumeOption,
     ScannerOptions,
     SeedOption,
     scanner_options,
@@ -66,10 +67,7 @@ def acceptance(
     options: ScannerOptions,
     seed: SeedOption = 0,
     overwrite: OverwriteOption = False,
-    resume: Annotated[
-        bool,
-        typer.Option("--resume", help="Continue an interrupted run in OUT (same settings)."),
-    ] = False,
+    resume: ResumeOption = False,
     no_report: NoReportOption = False,
     json_out: JsonOption = False,
     quiet: QuietOption = False,

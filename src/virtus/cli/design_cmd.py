@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from virtus.cli.options import OverwriteOption, ScannerOptions, scanner_options
+from virtus.cli.options import OverwriteOption, ResumeOption, ScannerOptions, scanner_options
 from virtus.cli.output import JsonOption, Output, QuietOption, Summary
 
 _VARY_HELP = (
@@ -60,10 +60,7 @@ def design(
     ] = None,
     options: ScannerOptions,
     overwrite: OverwriteOption = False,
-    resume: Annotated[
-        bool,
-        typer.Option("--resume", help="Continue an interrupted run in OUT (same settings)."),
-    ] = False,
+    resume: ResumeOption = False,
     json_out: JsonOption = False,
     quiet: QuietOption = False,
 ) -> None:

@@ -7,6 +7,7 @@ from typing import Annotated
 
 import typer
 
+from virtus.cli.options import OverwriteOption
 from virtus.cli.output import JsonOption, Output, QuietOption, Summary
 from virtus.cli.report_cmd import NoReportOption, add_report
 
@@ -40,9 +41,7 @@ def train(
     resume: Annotated[
         bool, typer.Option("--resume", help="Continue the run in OUT from its last checkpoint.")
     ] = False,
-    overwrite: Annotated[
-        bool, typer.Option("--overwrite", help="Remove an earlier run's files in OUT first.")
-    ] = False,
+    overwrite: OverwriteOption = False,
     device: DeviceOption = None,
     json_out: JsonOption = False,
     quiet: QuietOption = False,

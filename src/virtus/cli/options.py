@@ -76,6 +76,11 @@ PixelSizeOption = Annotated[
 OverwriteOption = Annotated[
     bool, typer.Option("--overwrite", help="Remove an earlier run's files in OUT first.")
 ]
+#: ``--resume``: continue an interrupted run in its directory (commands that keep finished
+#: parts say which in their own help).
+ResumeOption = Annotated[
+    bool, typer.Option("--resume", help="Continue an interrupted run in OUT (same settings).")
+]
 LookupOption = Annotated[Lookup | None, typer.Option(help=LOOKUP_HELP)]
 ProjectorOption = Annotated[
     str,

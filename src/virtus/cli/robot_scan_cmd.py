@@ -7,7 +7,13 @@ from typing import Annotated
 
 import typer
 
-from virtus.cli.options import OverwriteOption, ScannerOptions, SeedOption, scanner_options
+from virtus.cli.options import (
+    OverwriteOption,
+    ResumeOption,
+    ScannerOptions,
+    SeedOption,
+    scanner_options,
+)
 from virtus.cli.output import JsonOption, Output, QuietOption, Summary
 from virtus.cli.report_cmd import NoReportOption, add_report
 
@@ -59,9 +65,7 @@ def robot_scan(
     options: ScannerOptions,
     seed: SeedOption = 0,
     overwrite: OverwriteOption = False,
-    resume: Annotated[
-        bool, typer.Option("--resume", help="Continue an interrupted run (same settings).")
-    ] = False,
+    resume: ResumeOption = False,
     no_report: NoReportOption = False,
     json_out: JsonOption = False,
     quiet: QuietOption = False,

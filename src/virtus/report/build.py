@@ -23,6 +23,7 @@ leaves nothing behind. What each kind shows:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -241,56 +242,29 @@ def _turntable(page: Page, info: RunInfo) -> None:
                    "merged.ply, object frame; colour: z")  # fmt: skip
 
 
-def _calibrate(page: Page, info: RunInfo) -> None:
-    add_calibration(page, info.path, "Calibration")
-
-
-def _ablation(page: Page, info: RunInfo) -> None:
-    others.add_ablation(page, info.path)
-
-
-def _twin(page: Page, info: RunInfo) -> None:
-    others.add_twin(page, info.path)
-
-
-def _dataset(page: Page, info: RunInfo) -> None:
-    others.add_dataset(page, info.path)
-
-
-def _acceptance(page: Page, info: RunInfo) -> None:
-    design.add_acceptance(page, info.path)
+def _of_path(add: Callable[[Page, Path], None]) -> Callable[[Page, RunInfo], None]:
+    """A builder for a kind whose section needs only the run's directory."""
+    return lambda page, info: add(page, info.path)
 
 
 def _predict(page: Page, info: RunInfo) -> None:
     design.add_predict(page, info.path, info.record)
 
 
-def _design(page: Page, info: RunInfo) -> None:
-    design.add_design(page, info.path)
-
-
-def _robot_scan(page: Page, info: RunInfo) -> None:
-    robot.add_robot_scan(page, info.path)
-
-
-def _learn(page: Page, info: RunInfo) -> None:
-    learn.add_learn(page, info.path)
-
-
 _BUILDERS = {
     "demo": _demo,
-    "calibrate": _calibrate,
+    "calibrate": lambda page, info: add_calibration(page, info.path, "Calibration"),
     "capture": _capture_like,
     "scan": _capture_like,
     "turntable": _turntable,
-    "ablation": _ablation,
-    "twin": _twin,
-    "dataset": _dataset,
-    "acceptance": _acceptance,
+    "ablation": _of_path(others.add_ablation),
+    "twin": _of_path(others.add_twin),
+    "dataset": _of_path(others.add_dataset),
+    "acceptance": _of_path(design.add_acceptance),
     "predict": _predict,
-    "design": _design,
-    "robot-scan": _robot_scan,
-    "learn": _learn,
+    "design": _of_path(design.add_design),
+    "robot-scan": _of_path(robot.add_robot_scan),
+    "learn": _of_path(learn.add_learn),
 }
 
 _TITLES = {

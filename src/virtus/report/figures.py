@@ -206,14 +206,20 @@ def scatter_fields(
         for index, (_, uv) in enumerate(sets):
             uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
             axes.plot(uv[:, 0], uv[:, 1], ".", markersize=2, color=f"C{index % 10}")
-        axes.set_xlim(-0.5, width - 0.5)
-        axes.set_ylim(height - 0.5, -0.5)
-        axes.set_aspect("equal")
-        axes.set_title(f"{name} ({width}x{height} px)", fontsize=9)
-        axes.set_xlabel("u (px)")
-        axes.set_ylabel("v (px)")
+        _pixel_axes(axes, (width, height), f"{name} ({width}x{height} px)")
     figure.suptitle(title)
     return png_bytes(figure)
+
+
+def _pixel_axes(axes: Any, size: tuple[int, int], title: str) -> None:
+    """Set ``axes`` up as a device's image: pixel centres at integers, v down, square px."""
+    width, height = size
+    axes.set_xlim(-0.5, width - 0.5)
+    axes.set_ylim(height - 0.5, -0.5)
+    axes.set_aspect("equal")
+    axes.set_title(title, fontsize=9)
+    axes.set_xlabel("u (px)")
+    axes.set_ylabel("v (px)")
 
 
 def vector_field(
@@ -232,13 +238,8 @@ def vector_field(
         axes.quiver(uv[:, 0], uv[:, 1], residual[:, 0] * gain, residual[:, 1] * gain,
                     size, cmap="viridis", angles="xy", scale_units="xy", scale=1,
                     width=0.004)  # fmt: skip
-        axes.set_xlim(-0.5, width - 0.5)
-        axes.set_ylim(height - 0.5, -0.5)
-        axes.set_aspect("equal")
         rms = float(np.sqrt(np.mean(size**2))) if size.size else float("nan")
-        axes.set_title(f"{name}: RMS {rms:.4f} px, arrows x{gain:.0f}", fontsize=9)
-        axes.set_xlabel("u (px)")
-        axes.set_ylabel("v (px)")
+        _pixel_axes(axes, (width, height), f"{name}: RMS {rms:.4f} px, arrows x{gain:.0f}")
     figure.suptitle(title)
     return png_bytes(figure)
 

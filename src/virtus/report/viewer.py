@@ -201,6 +201,14 @@ VIEWER_JS = r"""
     gl.compileShader(s);
     return s;
   }
+  function attribute(gl, program, name, values, size, type) {
+    // a normalised vertex attribute read from its own buffer of ``values``
+    gl.bindBuffer(gl.ARRAY_BUFFER, gl.createBuffer());
+    gl.bufferData(gl.ARRAY_BUFFER, values, gl.STATIC_DRAW);
+    var location = gl.getAttribLocation(program, name);
+    gl.enableVertexAttribArray(location);
+    gl.vertexAttribPointer(location, size, type, true, 0, 0);
+  }
   function showStill(block, canvas, still, mode) {
     canvas.style.display = "none";
     still.style.display = "block";
@@ -235,18 +243,8 @@ VIEWER_JS = r"""
     }
     gl.useProgram(program);
     var positions = bytes(data.positions), colours = bytes(data.colours);
-    var qbuffer = gl.createBuffer();
-    gl.bindBuffer(gl.ARRAY_BUFFER, qbuffer);
-    gl.bufferData(gl.ARRAY_BUFFER, positions, gl.STATIC_DRAW);
-    var q = gl.getAttribLocation(program, "q");
-    gl.enableVertexAttribArray(q);
-    gl.vertexAttribPointer(q, 3, gl.UNSIGNED_SHORT, true, 0, 0);
-    var cbuffer = gl.createBuffer();
-    gl.bindBuffer(gl.ARRAY_BUFFER, cbuffer);
-    gl.bufferData(gl.ARRAY_BUFFER, colours, gl.STATIC_DRAW);
-    var c = gl.getAttribLocation(program, "c");
-    gl.enableVertexAttribArray(c);
-    gl.vertexAttribPointer(c, 1, gl.UNSIGNED_BYTE, true, 0, 0);
+    attribute(gl, program, "q", positions, 3, gl.UNSIGNED_SHORT);
+    attribute(gl, program, "c", colours, 1, gl.UNSIGNED_BYTE);
     var lut = new Uint8Array(256 * 4);
     for (var i = 0; i < 256; i++) {
       lut[4 * i] = data.palette[i][0]; lut[4 * i + 1] = data.palette[i][1];
