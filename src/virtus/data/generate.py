@@ -481,9 +481,8 @@ def _worker_init(threads: int, die_with_parent: bool = True) -> None:
     global _IN_WORKER, _WORKER_THREADS
     _IN_WORKER = True
     _WORKER_THREADS = threads
-    # The store's own checksum/compression threads, at most its default: more threads than
-    # the worker's share of the cores only add memory in flight.
-    _store_module._WRITE_THREADS = max(1, min(_store_module._WRITE_THREADS, threads))
+    # More compression threads than the worker's share of the cores only add memory in flight.
+    _store_module.limit_write_threads(threads)
     if not die_with_parent:
         return
     try:

@@ -100,6 +100,13 @@ _MAX_RECORD_BYTES = 64 << 20
 #: Threads that checksum and compress a shard while it is written (the work releases the
 #: GIL; more threads than cores only add memory in flight).
 _WRITE_THREADS = max(1, min(4, os.cpu_count() or 1))
+
+
+def limit_write_threads(threads: int) -> None:
+    """Use at most ``threads`` checksum/compression threads in this process (a dataset
+    worker's share of the cores; never more than the default)."""
+    global _WRITE_THREADS
+    _WRITE_THREADS = max(1, min(_WRITE_THREADS, threads))
 #: Held while a store opens its Zarr arrays and shard encoders (once per process, possibly
 #: from several pipeline threads); module-wide so that a store stays picklable.
 _OPEN_LOCK = threading.Lock()
