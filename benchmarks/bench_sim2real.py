@@ -258,6 +258,11 @@ def _train_config(args: argparse.Namespace):
     )
 
 
+def _progress(message: str) -> None:
+    """One line at once (a run cut off at a time limit still shows how far it got)."""
+    print(f"[{time.strftime('%H:%M:%S')}] {message}", flush=True)
+
+
 def run(args: argparse.Namespace) -> dict:
     from virtus.data import generate
     from virtus.learn import evaluate, evaluate_captures, train
@@ -270,12 +275,20 @@ def run(args: argparse.Namespace) -> dict:
     results, timings = {}, {}
     for variant in args.variants:
         store, run_dir = args.out / f"{variant}.zarr", args.out / f"run-{variant}"
+        _progress(f"{variant}: generating {args.num} samples into {store}")
         start = time.perf_counter()
         generate(dataset_config(real, variant, args.num), store, workers=args.workers)
         timings[f"generate_{variant}_s"] = time.perf_counter() - start
+        _progress(f"{variant}: generated in {timings[f'generate_{variant}_s']:.0f} s; training")
         start = time.perf_counter()
-        train(config, store, run_dir, resume=True, device=args.device)
+
+        def step_done(step: int, variant: str = variant) -> None:
+            if step % 100 == 0:
+                _progress(f"{variant}: step {step} of {args.steps}")
+
+        train(config, store, run_dir, resume=True, device=args.device, on_step=step_done)
         timings[f"train_{variant}_s"] = time.perf_counter() - start
+        _progress(f"{variant}: trained in {timings[f'train_{variant}_s']:.0f} s; evaluating")
         results[variant] = {
             "devices": dict(zip(("sensor", "projector"), _devices(real, variant), strict=True)),
             "test": evaluate(run_dir, store, "test", device=args.device),
