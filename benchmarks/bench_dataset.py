@@ -20,7 +20,16 @@ before a plane) with :func:`virtus.data.generate`, once per ``--workers`` value 
 * for context, the renderer alone on the same scenes (``Scanner.capture``, frames/s): the
   ceiling a dataset run can reach on this machine;
 * with ``--codecs``, every codec and level on one stored sample: compression seconds on one
-  thread and compressed bytes (speed against size);
+  thread and compressed bytes (speed against size); then ``zstd`` and ``shuffle-zstd`` in
+  the GPU layout (:mod:`virtus.data.chunkcodecs`: pieces of 64 KiB, 256 KiB, 1 MiB, one
+  zstd frame each) by the numcodecs twin on one thread and, where nvCOMP and a GPU are
+  here, by nvCOMP (every piece of the sample in one batch, copies to and from the device
+  included);
+* with ``--compress-on cpu gpu`` (codec ``zstd`` or ``shuffle-zstd``): the same store made
+  once per setting, side by side -- images/s, CPU seconds a sample and its split
+  (render, labels, checksum, compression, io), compressed MB a sample, who encoded, and
+  whether the arrays are the same (every sample's checksum equal to the first run's);
+  with ``--gpus 1`` on a GPU host, else with the first ``--workers``;
 * with ``--gpus 1,2,4``: the same store made on 1, 2, 4 GPUs (``--workers-per-gpu`` pinned
   workers each, default 3/4 of the cores shared out over the most GPUs asked for), side by
   side: images/s over the whole run and in its steady state (between 10 % and 90 % of the
@@ -34,6 +43,8 @@ before a plane) with :func:`virtus.data.generate`, once per ``--workers`` value 
         [--json out.json]
     PYTHONPATH=src python benchmarks/bench_dataset.py --gpus 1,2,4 --samples 480
     PYTHONPATH=src python benchmarks/bench_dataset.py --gpus 1,2 --fake-gpus 2 --tiny --samples 16
+    PYTHONPATH=src python benchmarks/bench_dataset.py --codec shuffle-zstd --compress-on cpu gpu \
+        --gpus 1 --workers-per-gpu 8 --samples 480 --shard 8 --codecs
 
 Not a test: numbers depend on the machine and its load (quote them with the load average;
 on a shared machine compare old and new code back to back).
@@ -50,9 +61,11 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 from virtus.data import DatasetStore, generate, load_config
+from virtus.data.chunkcodecs import COMPRESS_ON, GPU_CODECS, quiet_numcodecs
 from virtus.data.config import CODECS
 from virtus.data.generate import TIMING_KEYS
 from virtus.data.sampling import Randomiser
@@ -142,11 +155,15 @@ def codec_table(store: DatasetStore) -> list[dict]:
             for level in (1, 3, 5) if codec != "none" else (0,):
                 seconds, size = 0.0, 0
                 for spec in store.layout:
-                    array = group.create_array(
-                        f"{codec}_{level}_{spec.name}", shape=(1, *spec.shape),
-                        chunks=(1, *spec.shape), shards=(1, *spec.shape), dtype=spec.dtype,
-                        fill_value=spec.fill, compressors=zarr_compressor(codec, level, spec.name),
-                    )  # fmt: skip
+                    with quiet_numcodecs():  # shuffle-zstd's numcodecs.shuffle
+                        array = group.create_array(
+                            f"{codec}_{level}_{spec.name}", shape=(1, *spec.shape),
+                            chunks=(1, *spec.shape), shards=(1, *spec.shape), dtype=spec.dtype,
+                            fill_value=spec.fill,
+                            compressors=zarr_compressor(
+                                codec, level, spec.name, np.dtype(spec.dtype).itemsize
+                            ),
+                        )  # fmt: skip
                     encoder = ShardEncoder.for_array(array, Path(tmp) / array.name)
                     start = time.perf_counter()
                     data = encoder.encode(sample[spec.name])
@@ -163,6 +180,97 @@ def codec_table(store: DatasetStore) -> list[dict]:
                     }
                 )
     return rows
+
+
+def frames_rows(sample: dict, repeats: int = 3) -> list[dict]:
+    """``zstd`` and ``shuffle-zstd`` of one sample's arrays in the GPU layout (each chunk cut
+    into pieces of 64 KiB, 256 KiB -- the default,
+    :data:`virtus.data.chunkcodecs.PIECE_BYTES` -- or 1 MiB, one zstd frame each): by the
+    numcodecs twin on one CPU thread, and where nvCOMP and a GPU are here by nvCOMP (one
+    batch of every piece, host copies included). The best of ``repeats`` after a warm-up."""
+    from virtus.data.chunkcodecs import CpuZstdFrames, NvcompZstdFrames
+    from virtus.errors import VirtusError
+
+    raw = sum(a.nbytes for a in sample.values())
+    chunks = [a.reshape(-1).view("u1") for a in sample.values()]
+    makers = [("CPU", CpuZstdFrames), ("GPU", NvcompZstdFrames)]
+    rows = []
+    for where, make in makers:
+        for piece_kib in (64, 256, 1024):
+            try:
+                compressor = make(piece_bytes=piece_kib << 10)
+            except VirtusError as error:
+                print(f"no GPU codec rows: {error}", file=sys.stderr)
+                return rows
+            for codec in GPU_CODECS:
+                sizes = [
+                    a.dtype.itemsize if codec == "shuffle-zstd" else 1 for a in sample.values()
+                ]
+                compressor.encode_chunks(chunks, sizes)  # warm-up: allocations, kernels
+                best, size = float("inf"), 0
+                for _ in range(repeats):
+                    start = time.perf_counter()
+                    size = sum(len(c) for c in compressor.encode_chunks(chunks, sizes))
+                    best = min(best, time.perf_counter() - start)
+                rows.append(
+                    {
+                        "codec": f"{codec} {where} {piece_kib}K",
+                        "level": 1 if where == "CPU" else 0, "encoder": compressor.name,
+                        "device_shuffle": getattr(compressor, "_torch", None) is not None,
+                        "seconds_per_sample": round(best, 4),
+                        "mb_per_s": round(raw / best / 1e6, 1),
+                        "bytes_per_sample": size, "ratio": round(raw / size, 2),
+                    }
+                )  # fmt: skip
+    return rows
+
+
+def compression_runs(config, folder: Path, args, per_gpu: int | None, frames: int) -> list[dict]:
+    """The store made once per ``--compress-on`` value (module docstring), after a one-shard
+    warm-up on the GPU path; the arrays compared through the records' checksums."""
+    import dataclasses
+    import shutil
+
+    where = {"gpus": args.gpus[0], "workers_per_gpu": per_gpu} if args.gpus else {
+        "workers": args.workers[0]}  # fmt: skip
+    warm = dataclasses.replace(config, num_samples=config.shard_samples, compress_on="auto")
+    generate(warm, folder / "warm-up", **where)
+    shutil.rmtree(folder / "warm-up")
+    runs, first = [], None
+    for value in args.compress_on:
+        path = folder / f"store_{value}"
+        before = cpu_seconds()
+        report = generate(dataclasses.replace(config, compress_on=value), path, **where)
+        cpu = cpu_seconds() - before
+        store = DatasetStore.open(path)
+        checksums = {i: m["checksum"] for i, m in store.samples().items()}
+        first = checksums if first is None else first
+        stages = {k: round(report.timing_s.get(k, 0.0) / args.samples, 4) for k in TIMING_KEYS}
+        size = sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
+        runs.append(
+            {
+                "compress_on": value, **where, "encoders": report.encoders,
+                "note": report.compression_note, "seconds": round(report.seconds, 3),
+                "images_per_s": round(args.samples * frames / report.seconds, 1),
+                "cpu_s_per_sample": round(cpu / args.samples, 4),
+                "stage_s_per_sample": stages, "mb_per_sample": round(size / args.samples / 1e6, 2),
+                "same_arrays_as_first": checksums == first,
+            }
+        )  # fmt: skip
+        print(compression_line(runs[-1]), file=sys.stderr, flush=True)
+        shutil.rmtree(path)
+    return runs
+
+
+def compression_line(entry: dict) -> str:
+    stages = entry["stage_s_per_sample"]
+    split = ", ".join(f"{k} {stages[k]:.3f}" for k in TIMING_KEYS if k != "write")
+    return (
+        f"compress_on {entry['compress_on']} ({', '.join(entry['encoders'])}): "
+        f"{entry['images_per_s']:.1f} images/s, {entry['cpu_s_per_sample']:.3f} CPU-s a sample "
+        f"(stage s a sample: {split}), {entry['mb_per_sample']:.1f} MB a sample, same arrays "
+        f"as the first: {entry['same_arrays_as_first']}"
+    )
 
 
 def run(config, folder: Path, samples: int, workers: int, frames_per_sample: int) -> dict:
@@ -311,6 +419,8 @@ def summary(result: dict) -> str:
             f"stage seconds: {split}; "
             f"{entry['bytes_on_disk'] / 1e6:.0f} MB on disk of {entry['bytes_raw'] / 1e6:.0f} MB"
         )
+    for entry in result.get("compression_runs", []):
+        lines.append(compression_line(entry))
     for row in result.get("codecs", []):
         lines.append(
             f"  codec {row['codec']:<10} level {row['level']}: {row['seconds_per_sample']:.3f} "
@@ -366,8 +476,14 @@ def main() -> None:
     parser.add_argument("--tiny", action="store_true", help="64 x 48 camera, 22 frames")
     parser.add_argument("--codecs", action="store_true", help="also compare codecs and levels")
     parser.add_argument("--no-renderer", action="store_true", help="skip the renderer alone")
+    parser.add_argument(
+        "--compress-on", nargs="+", choices=list(COMPRESS_ON),
+        help="compare who compresses (codec zstd or shuffle-zstd), e.g. cpu gpu",
+    )  # fmt: skip
     parser.add_argument("--json", type=Path, help="also write the numbers here")
     args = parser.parse_args()
+    if args.compress_on and args.codec not in GPU_CODECS:
+        parser.error(f"--compress-on compares codecs {' or '.join(GPU_CODECS)}, not {args.codec}")
     per_gpu = gpu_setup(parser, args) if args.gpus else None
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -382,8 +498,13 @@ def main() -> None:
         frames_per_sample = len(sample.scanner.sequence)
         cam = sample.scanner.rig.camera.intrinsics
         renderer_load = load()
-        renderer, runs, gpu_runs = None, [], []
-        if args.gpus:  # the renderer alone would hold a CUDA context in this process
+        renderer, runs, gpu_runs, compression = None, [], [], []
+        if args.compress_on:
+            compression = compression_runs(config, folder, args, per_gpu, frames_per_sample)
+            if args.codecs:  # one store to take the sample from
+                generate(config.with_num_samples(1), folder / "store_w1", workers=1)
+            first = folder / "store_w1"
+        elif args.gpus:  # the renderer alone would hold a CUDA context in this process
             gpu_runs = gpu_scaling(
                 config, folder, args.samples, args.gpus, per_gpu, frames_per_sample, args.codecs
             )
@@ -393,6 +514,8 @@ def main() -> None:
             runs = [run(config, folder, args.samples, w, frames_per_sample) for w in args.workers]
             first = folder / f"store_w{args.workers[0]}"
         codecs = codec_table(DatasetStore.open(first)) if args.codecs else []
+        if args.codecs:
+            codecs += frames_rows(DatasetStore.open(first).read_sample(0))
     result = {
         "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
         f"{platform.system()}",
@@ -409,6 +532,7 @@ def main() -> None:
         "workers_per_gpu": per_gpu,
         "fake_gpus": args.fake_gpus,
         "gpu_runs": gpu_runs,
+        "compression_runs": compression,
         "codecs": codecs,
         "paper_images_per_s": 3.1,
         "target_images_per_s": 150.0,

@@ -47,9 +47,17 @@ number; lists of choices are drawn uniformly per sample)::
     turntable: {views: 12, tilt_deg: 15}                      # scan mode
     board: {spec: "4x7"}                                      # calibration mode
     ablation: {materials: [matte, glossy, metal, reflective], ambients: [dark, ambient]}
-    storage: {shard_samples: 8, codec: blosc-zstd, level: 1, label_dtype: float32}
+    storage: {shard_samples: 8, codec: blosc-zstd, level: 1, label_dtype: float32,
+              compress_on: auto}             # auto | cpu | gpu (zstd, shuffle-zstd only)
 
 Units: metres, degrees where a key says ``_deg``, projector px for periods.
+
+``storage.compress_on`` says who compresses, not what is stored: ``cpu`` (numcodecs),
+``gpu`` (nvCOMP, ``pip install virtus-fpp[gpu]``; only for the codecs ``zstd`` and
+``shuffle-zstd``, refused without nvCOMP or a CUDA device) or ``auto`` (the GPU where that
+works, else the CPU, and the run says so). The arrays are the same either way, so it is not
+part of a store's identity: a store may be resumed with another one
+(:mod:`virtus.data.chunkcodecs`).
 """
 
 from __future__ import annotations
@@ -98,8 +106,9 @@ MAX_SHARD_BYTES = 4 << 30
 MAX_MESH_FILES = 10_000
 #: Storage codecs: Blosc (byte shuffle) with zstd (the default) or lz4 for every array,
 #: ``blosc-auto`` (frames with blosc-zstd, labels with blosc-lz4: less compression work,
-#: more bytes; see :func:`virtus.data.store.zarr_compressor`), plain zstd, none.
-CODECS = ("blosc-zstd", "blosc-auto", "blosc-lz4", "zstd", "none")
+#: more bytes; see :func:`virtus.data.chunkcodecs.zarr_compressor`), plain zstd, byte shuffle
+#: then zstd (``shuffle-zstd``: as small as blosc-zstd, and written by the GPU too), none.
+CODECS = ("blosc-zstd", "blosc-auto", "blosc-lz4", "zstd", "shuffle-zstd", "none")
 #: Object source types.
 SOURCE_TYPES = ("sphere", "box", "freeform", "mesh_folder")
 #: Fringe codings built from ``fringes`` (see :mod:`virtus.patterns`).
@@ -384,6 +393,8 @@ class DatasetConfig:
     shard_samples : samples per shard (the write unit; each worker owns whole shards).
     codec, level : compression (:data:`CODECS`) and its level.
     label_dtype : ``float32`` or ``float64`` for real-valued labels.
+    compress_on : who compresses: ``auto``, ``cpu`` or ``gpu`` (module docstring; not part
+        of :meth:`identity`).
     """
 
     mode: str
@@ -420,6 +431,7 @@ class DatasetConfig:
     codec: str = "blosc-zstd"
     level: int = 1
     label_dtype: str = "float32"
+    compress_on: str = "auto"
 
     # -- reading ------------------------------------------------------------------------
 
@@ -464,7 +476,9 @@ class DatasetConfig:
         turntable = _section(data, "turntable", ("views", "tilt_deg"))
         board = _section(data, "board", ("spec",))
         ablation = _section(data, "ablation", ("materials", "ambients"))
-        storage = _section(data, "storage", ("shard_samples", "codec", "level", "label_dtype"))
+        storage = _section(
+            data, "storage", ("shard_samples", "codec", "level", "label_dtype", "compress_on")
+        )
 
         def member(table: Mapping[str, Any], what: str):  # noqa: ANN202
             def check(name: str, value: Any) -> str:
@@ -490,6 +504,7 @@ class DatasetConfig:
         codec = storage.get("codec", "blosc-zstd")
         if codec not in CODECS:
             raise InputError("storage.codec", f"one of {', '.join(CODECS)}", codec)
+        compress_on = _compress_on(storage.get("compress_on", "auto"), codec)
         label_dtype = storage.get("label_dtype", "float32")
         if label_dtype not in ("float32", "float64"):
             raise InputError("storage.label_dtype", "float32 or float64", label_dtype)
@@ -561,6 +576,7 @@ class DatasetConfig:
             codec=codec,
             level=_integer("storage.level", storage.get("level", 1), 0, 9),
             label_dtype=label_dtype,
+            compress_on=compress_on,
         )
         return config
 
@@ -622,15 +638,39 @@ class DatasetConfig:
                 "codec": self.codec,
                 "level": self.level,
                 "label_dtype": self.label_dtype,
+                "compress_on": self.compress_on,
             },
         }
 
+    def stored_dict(self) -> dict[str, Any]:
+        """:meth:`to_dict` without ``storage.compress_on``: the configuration a store records
+        in ``dataset.json`` (who compressed is recorded in its ``encoding``)."""
+        out = self.to_dict()
+        del out["storage"]["compress_on"]
+        return out
+
     def identity(self) -> dict[str, Any]:
         """What decides every sample's content: the configuration without ``num_samples``
-        (a store may be extended with more samples of the same configuration)."""
-        out = self.to_dict()
+        (a store may be extended with more samples of the same configuration) and without
+        ``storage.compress_on`` (who compresses changes no array)."""
+        out = self.stored_dict()
         del out["num_samples"]
         return out
+
+
+def _compress_on(value: Any, codec: str) -> str:
+    """``storage.compress_on``: one of :data:`~virtus.data.chunkcodecs.COMPRESS_ON`; ``gpu``
+    only with a codec the GPU writes (whether nvCOMP and a device are here is checked when
+    a run starts: :func:`~virtus.data.chunkcodecs.plan_compression`)."""
+    from virtus.data.chunkcodecs import COMPRESS_ON, GPU_CODECS
+
+    if not isinstance(value, str) or value not in COMPRESS_ON:
+        raise InputError("storage.compress_on", f"one of {', '.join(COMPRESS_ON)}", value)
+    if value == "gpu" and codec not in GPU_CODECS:
+        raise InputError(
+            "storage.compress_on gpu", f"storage.codec {' or '.join(GPU_CODECS)}", codec
+        )
+    return value
 
 
 def load_config(path: str | Path) -> DatasetConfig:

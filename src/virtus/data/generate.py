@@ -28,7 +28,12 @@
    actor per GPU share).
 
 Rerunning the same command after an interruption (even ``kill -9``) renders only the
-shards without a record; the store ends byte for byte as an uninterrupted run leaves it.
+shards without a record; the store ends byte for byte as an uninterrupted run leaves it
+(with the same encoder: ``storage.compress_on`` may move the compression to a GPU, whose
+bytes differ while the arrays and their checksums do not, :mod:`virtus.data.chunkcodecs`).
+Who compresses is decided before anything is written (:func:`plan_compression`: ``gpu``
+without nvCOMP or a CUDA device is refused; ``auto`` falls back to the CPU with a warning);
+each shard record and ``dataset.json``'s ``encoding`` name the encoders.
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ from __future__ import annotations
 import functools
 import os
 import time
+import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,6 +52,12 @@ import numpy as np
 from virtus import __version__
 from virtus.data import devices as _devices
 from virtus.data import store as _store_module
+from virtus.data.chunkcodecs import (
+    GPU_CODECS,
+    CompressionPlan,
+    encoding_description,
+    plan_compression,
+)
 from virtus.data.config import MAX_SHARD_BYTES, MAX_WORKERS, DatasetConfig
 from virtus.data.devices import Placement
 from virtus.data.labels import array_layout, sample_arrays
@@ -118,6 +130,10 @@ class GenerateReport:
         labelled and written while later ones render) sum to more than ``seconds``.
     shard_devices : shard -> the GPU (``CUDA_VISIBLE_DEVICES`` entry) that rendered it in
         this call; None on CPU (not recorded in the store: it does not change a byte).
+    encoders : who compressed the shards of this call -> how many shards
+        (``{"nvcomp 6.0.0.12": 12}``; also in each shard record).
+    compression_note : why ``storage.compress_on: auto`` compressed on the CPU (None when
+        it did not fall back).
     """
 
     path: Path
@@ -127,6 +143,8 @@ class GenerateReport:
     seconds: float
     timing_s: dict[str, float] = field(default_factory=dict)
     shard_devices: dict[int, str | None] = field(default_factory=dict)
+    encoders: dict[str, int] = field(default_factory=dict)
+    compression_note: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -138,6 +156,8 @@ class GenerateReport:
             "samples_per_s": self.rendered / self.seconds if self.seconds > 0 else None,
             "timing_s": self.timing_s,
             "shard_devices": {str(k): v for k, v in self.shard_devices.items()},
+            "encoders": self.encoders,
+            "compression_note": self.compression_note,
         }
 
 
@@ -359,6 +379,7 @@ def render_shard(
     buffer = _shard_buffer(store)
     metas, timing = _fill_shard(store, randomiser, shard, num_samples, buffer, on_sample)
     result = _result(shard, metas, timing, store.write_shard(shard, buffer, metas), 0.0)
+    result["encoder"] = store.encoder_name()
     if _IN_WORKER:
         result["device"] = os.environ.get(_devices.CUDA_ENV) or None
     return result
@@ -429,7 +450,8 @@ def _run_pipelined(
         write, labels = future.result()
         wait, waited = waited + time.perf_counter() - begin, 0.0
         labels += timing.pop("labels", 0.0)  # labelled on the device, while rendering
-        return _result(shard, metas, {**timing, "labels": labels}, write, wait)
+        out = _result(shard, metas, {**timing, "labels": labels}, write, wait)
+        return {**out, "encoder": store.encoder_name()}
 
     with (
         ThreadPoolExecutor(_SAMPLE_THREADS, thread_name_prefix="virtus-labels") as labeller,
@@ -582,6 +604,18 @@ def _layout(config: DatasetConfig, out: Path) -> tuple[Any, int]:
     return layout, shard_bytes
 
 
+def _plan(config: DatasetConfig, storage: str) -> CompressionPlan | None:
+    """Who compresses this run's chunks (None: PNG storage), checked before anything is
+    written; ``auto`` falling back to the CPU for a codec the GPU writes says so (a warning,
+    and :attr:`GenerateReport.compression_note`)."""
+    if storage != "zarr":
+        return None
+    plan = plan_compression(config.codec, config.compress_on)
+    if plan.note and config.compress_on == "auto" and config.codec in GPU_CODECS:
+        warnings.warn(f"storage.compress_on auto: {plan.note}", stacklevel=3)
+    return plan
+
+
 def _connect(
     ray: str, timeout: float, workers: int | None, gpus: int | str | None,
     workers_per_gpu: int | None,
@@ -658,16 +692,20 @@ def generate(
     if out.exists() and not out.is_dir():
         raise InputError("--out", "a folder (new, empty, or a dataset store)", f"a file {out}")
     _check_mesh_files(config)
+    plan = _plan(config, storage)
     if ray is not None:  # before the store is touched
         cluster, slots = _connect(ray, ray_timeout, workers, gpus, workers_per_gpu)
     with directory_lock(out):
         store = DatasetStore.prepare(
             out,
-            config=config.to_dict(),
+            config=config.stored_dict(),
             identity=_identity(config),
             layout=layout,
             storage=storage,
             num_samples=config.num_samples,
+            encoding=encoding_description(config.codec, config.level, config.compress_on, [])
+            if storage == "zarr"
+            else None,
         )
         target = config.num_samples
         todo = store.missing_shards(target)
@@ -693,12 +731,18 @@ def generate(
         else:
             results = _run_ray(out, todo, target, store.digest, cluster, workers or 1, slots, tick)
         here = placement.devices[0] if placement is not None and placement.devices else None
+        encoders: dict[str, int] = {}
         for result in results:
             for stage, seconds in result["timing_s"].items():
                 timing[stage] += seconds
             shard_devices[result["shard"]] = result["device"] or here
+            encoders[result["encoder"]] = encoders.get(result["encoder"], 0) + 1
         seconds = time.perf_counter() - start
-        complete = sum(1 for i in store.samples() if i < target)
+        records = store.records()
+        complete = sum(int(m["index"]) < target for r in records.values() for m in r["samples"])
+        if storage == "zarr":  # every encoder a record names (a killed run's too)
+            named = {r.get("encoder") for r in records.values()}
+            store.add_encoders(sorted(e for e in named if isinstance(e, str)))
     return GenerateReport(
         out,
         target,
@@ -707,4 +751,6 @@ def generate(
         seconds,
         timing,
         dict(sorted(shard_devices.items())),
+        encoders,
+        plan.note if plan is not None else None,
     )

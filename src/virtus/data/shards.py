@@ -13,8 +13,12 @@ concatenated copy of the shard), which a dataset generator would pay for every b
 Handled layouts (those :class:`virtus.data.store.DatasetStore` creates): chunks of one
 element along the first axis and the full extent on the others, the index at the end with
 the ``bytes`` + ``crc32c`` index codecs, chunk codecs ``bytes`` (little endian) then
-``blosc``, ``zstd`` or nothing. :meth:`ShardEncoder.for_array` returns None for any other
-array (the caller writes through Zarr).
+``blosc``, ``zstd``, ``numcodecs.shuffle`` + ``zstd`` (``shuffle-zstd``,
+:mod:`virtus.data.chunkcodecs`) or nothing. A chunk's stored bytes come from the array's
+numcodecs codec (:meth:`ShardEncoder.encode`) or, for zstd, from a batch compressor that
+encodes many chunks at once (nvCOMP on a GPU: :meth:`ShardEncoder.raw` gives it a chunk's
+bytes, :meth:`ShardEncoder.write` takes what it made). :meth:`ShardEncoder.for_array`
+returns None for any other array (the caller writes through Zarr).
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from virtus.data.chunkcodecs import shuffle_bytes
 from virtus.io.runs import atomic_write
 
 __all__ = ["ShardEncoder"]
@@ -80,6 +85,9 @@ class ShardEncoder:
     fill : the fill value (a chunk equal to it everywhere is not stored; NaN equals NaN).
     compressor : numcodecs codec applied after ``bytes`` (None: stored raw).
     key : shard number -> its key below ``folder`` (``"c/3/0/0"``).
+    shuffle : byte-shuffle element size before the compressor (``numcodecs.shuffle``; 0:
+        none).
+    codec_name : the compressor's Zarr name (``"zstd"``, ``"blosc"``; None: stored raw).
     """
 
     folder: Path
@@ -89,6 +97,8 @@ class ShardEncoder:
     fill: Any
     compressor: Any
     key: Callable[[int], str]
+    shuffle: int = 0
+    codec_name: str | None = None
 
     @classmethod
     def for_array(cls, array: Any, folder: str | Path) -> ShardEncoder | None:
@@ -112,21 +122,28 @@ class ShardEncoder:
             or not _little_endian_bytes(config["index_codecs"][0])
             or not inner
             or not _little_endian_bytes(inner[0])
-            or len(inner) > 2
+            or len(inner) > 3
             or chunk_shape[0] != 1
             or chunk_shape[1:] != tuple(array.shape[1:])
             or shard_shape[1:] != chunk_shape[1:]
         ):
             return None
-        compressor = _compressor(inner[1]) if len(inner) == 2 else None
-        if compressor is False:
-            return None
         dtype = np.dtype(array.dtype).newbyteorder("<")
+        shuffle = 0
+        if len(inner) == 3:  # shuffle-zstd: numcodecs.shuffle of whole elements, then zstd
+            shuffle = int(inner[1].get("configuration", {}).get("elementsize", 0))
+            if inner[1]["name"] != "numcodecs.shuffle" or shuffle != dtype.itemsize:
+                return None
+            inner = [inner[0], inner[2]]
+        compressor = _compressor(inner[1]) if len(inner) == 2 else None
+        if compressor is False or (shuffle and inner[1]["name"] != "zstd"):
+            return None
         fill = np.asarray(array.fill_value, dtype=dtype)[()]
         dims = len(chunk_shape) - 1
         return cls(
             Path(folder), chunk_shape, shard_shape[0], dtype, fill, compressor,
-            lambda shard: meta.encode_chunk_key((shard, *([0] * dims))),
+            lambda shard: meta.encode_chunk_key((shard, *([0] * dims))), shuffle,
+            inner[1]["name"] if len(inner) == 2 else None,
         )  # fmt: skip
 
     def path(self, shard: int) -> Path:
@@ -150,8 +167,9 @@ class ShardEncoder:
                 return False
         return True
 
-    def encode(self, chunk: np.ndarray) -> bytes | memoryview | None:
-        """One chunk's stored bytes; None for a chunk of only the fill value.
+    def raw(self, chunk: np.ndarray) -> np.ndarray | None:
+        """A chunk's bytes before the byte shuffle and the compressor ((n,) uint8, little
+        endian); None for a chunk of only the fill value (not stored).
 
         Parameters
         ----------
@@ -161,10 +179,17 @@ class ShardEncoder:
             raise ValueError(f"chunk of {chunk.size} elements, expected {self.chunk_shape}")
         if self.is_fill(chunk):
             return None
-        raw = np.ascontiguousarray(chunk, dtype=self.dtype).reshape(-1).view(np.uint8)
+        return np.ascontiguousarray(chunk, dtype=self.dtype).reshape(-1).view(np.uint8)
+
+    def encode(self, chunk: np.ndarray) -> bytes | memoryview | None:
+        """One chunk's stored bytes by the array's own codecs (numcodecs); None for a chunk
+        of only the fill value. ``chunk`` as in :meth:`raw`."""
+        raw = self.raw(chunk)
+        if raw is None:
+            return None
         if self.compressor is None:
             return memoryview(raw)
-        return self.compressor.encode(raw)
+        return self.compressor.encode(shuffle_bytes(raw, self.shuffle))
 
     def index(self, encoded: Sequence[bytes | memoryview | None]) -> bytes:
         """The shard index with its CRC-32C for ``encoded`` chunks (in chunk order)."""

@@ -7,13 +7,14 @@ Layout of a store directory ``STORE`` (format :data:`STORE_FORMAT`)::
                                     without num_samples + input file digests + virtus
                                     version) and its digest, the array layout (names,
                                     per-sample shapes, dtypes, units, fills), units,
-                                    num_samples (the latest requested)
+                                    num_samples (the latest requested), encoding (stored
+                                    bytes' format, encoders: virtus.data.chunkcodecs)
     STORE/manifest/shard_000012.json  one record per finished shard, written atomically
                                     after the shard's data: format, dataset digest, shard,
                                     and per sample: index, split, group, seed, checksum,
                                     n_frames, rig, cam2world, scanner (sequence, sensor,
                                     projector, spp, bounces), render settings, objects,
-                                    mode details
+                                    mode details; the encoder ("nvcomp 6.0.0.12")
     STORE/assets/                   generated meshes (free-form objects), STL, metres
     STORE/.virtus.lock              held by the generating process
 
@@ -58,6 +59,8 @@ import numpy as np
 
 from virtus import __version__
 from virtus.capture.capture import UNITS as CAPTURE_UNITS
+from virtus.data import chunkcodecs as _codecs
+from virtus.data.chunkcodecs import quiet_numcodecs, zarr_compressor
 from virtus.data.integrity import (
     DamagedSample,
     check_arrays,
@@ -100,13 +103,6 @@ _MAX_RECORD_BYTES = 64 << 20
 #: Threads that checksum and compress a shard while it is written (the work releases the
 #: GIL; more threads than cores only add memory in flight).
 _WRITE_THREADS = max(1, min(4, os.cpu_count() or 1))
-
-
-def limit_write_threads(threads: int) -> None:
-    """Use at most ``threads`` checksum/compression threads in this process (a dataset
-    worker's share of the cores; never more than the default)."""
-    global _WRITE_THREADS
-    _WRITE_THREADS = max(1, min(_WRITE_THREADS, threads))
 #: Held while a store opens its Zarr arrays and shard encoders (once per process, possibly
 #: from several pipeline threads); module-wide so that a store stays picklable.
 _OPEN_LOCK = threading.Lock()
@@ -114,32 +110,11 @@ _OPEN_LOCK = threading.Lock()
 _IGNORED = (".virtus.lock", ".virtus-tmp")
 
 
-#: Blosc block size (bytes) of a new store. Blosc's own choice at level 1 is a few tens of
-#: kB; 1 MiB blocks compress a 960 x 960 sample about 1.7x faster and 14 % smaller with
-#: blosc-zstd (blosc-auto: 1.6x faster, 6 % smaller). A store keeps the block size it was
-#: made with (it is in each array's Zarr metadata, which the shard writer follows).
-BLOSC_BLOCK_BYTES = 1 << 20
-
-
-def zarr_compressor(codec: str, level: int, array: str) -> Any:
-    """The Zarr compressor of array ``array`` for a store's ``storage.codec`` and ``level``
-    (:data:`~virtus.data.config.CODECS`; None: stored raw). ``blosc-auto`` compresses the
-    frames with blosc-zstd and every label with blosc-lz4: zstd makes the frames much
-    smaller than lz4 does, while most real-valued labels come out nearly as small with lz4
-    at a fraction of zstd's time. At 960 x 960, level 1, one thread: blosc-zstd 0.19 s and
-    35 MB a sample, blosc-auto 0.12 s and 39 MB (``benchmarks/bench_dataset.py --codecs``);
-    on the 2-core benchmark machine both give the same images/s within its noise, so the
-    default stays the smaller blosc-zstd."""
-    from zarr.codecs import BloscCodec, ZstdCodec
-
-    if codec == "none":
-        return None
-    if codec == "zstd":
-        return ZstdCodec(level=level)
-    if codec == "blosc-auto":
-        codec = "blosc-zstd" if array == "frames" else "blosc-lz4"
-    cname = codec.removeprefix("blosc-")
-    return BloscCodec(cname=cname, clevel=level, shuffle="shuffle", blocksize=BLOSC_BLOCK_BYTES)
+def limit_write_threads(threads: int) -> None:
+    """Use at most ``threads`` checksum/compression threads in this process (a dataset
+    worker's share of the cores; never more than the default)."""
+    global _WRITE_THREADS
+    _WRITE_THREADS = max(1, min(_WRITE_THREADS, threads))
 
 
 def _timed(work: Callable[..., Any], *args: Any) -> tuple[Any, float]:
@@ -265,11 +240,13 @@ class DatasetStore:
         layout: tuple[ArraySpec, ...],
         storage: str,
         num_samples: int,
+        encoding: dict[str, Any] | None = None,
     ) -> DatasetStore:
         """Create the store, or reopen one made with the same identity and extend it.
 
         Call it holding the directory's lock. Nothing is rendered here; the arrays are
-        created (or resized) so that ``num_samples`` fit.
+        created (or resized) so that ``num_samples`` fit. ``encoding``: this run's
+        :func:`~virtus.data.chunkcodecs.encoding_description`.
 
         Raises
         ------
@@ -320,6 +297,9 @@ class DatasetStore:
             "identity_digest": digest,
             "layout": [a.to_dict() for a in layout],
         }
+        if encoding is not None:
+            description["encoding"] = encoding
+            _codecs.merge_encoding(description, _codecs.recorded_encoders(previous))
         if previous is not None:
             description["num_samples"] = max(num_samples, int(previous["num_samples"]))
         store = cls(path, description)
@@ -433,9 +413,8 @@ class DatasetStore:
         middle = time.perf_counter()
         chunks = {}
         if self.storage == "zarr":
-            for name, encoder in self._shard_encoders().items():
-                if encoder is not None:
-                    chunks[name] = encoder.encode(arrays[name])
+            encoders, batch = self._shard_encoders(), self._batch_compressor()
+            chunks = _codecs.encode_samples(encoders, [arrays], batch)[0]
         seconds = {"checksum": middle - begin, "compression": time.perf_counter() - middle}
         return EncodedSample(checksum, chunks, seconds)
 
@@ -498,6 +477,11 @@ class DatasetStore:
             io_start = time.perf_counter()
             if self.storage == "zarr":
                 encoders = self._shard_encoders()
+                batch = self._batch_compressor() if encoded is None else None
+                if batch is not None:  # the shard's chunks in one batch, here (nvCOMP)
+                    done, seconds = _timed(_codecs.encode_samples, encoders, samples, batch)
+                    timing["compression"] += seconds
+                    encoded = [EncodedSample("", chunks, {}) for chunks in done]
                 chunks = {
                     name: [
                         pool.submit(_timed, encoder.encode, s[name])
@@ -531,6 +515,7 @@ class DatasetStore:
             "dataset": self.digest,
             "shard": shard,
             "samples": metas,
+            "encoder": self.encoder_name(),
         }
         io_start = time.perf_counter()
         write_json_atomic(self._record_path(shard), record)
@@ -686,11 +671,13 @@ class DatasetStore:
 
     # -- zarr -----------------------------------------------------------------------------
 
+    @quiet_numcodecs()
     def _zarr_create(self, num: int, storage: dict[str, Any]) -> None:
         import zarr
 
         group = zarr.open_group(self.path, mode="a")
         group.attrs.update({"virtus": {"format": STORE_FORMAT, "units": UNITS}})
+        codec = (storage["codec"], int(storage["level"]))
         for spec in self.layout:
             if spec.name in group:
                 array = group[spec.name]
@@ -704,7 +691,7 @@ class DatasetStore:
                 shards=(self.shard_samples, *spec.shape),
                 dtype=spec.dtype,
                 fill_value=spec.fill,
-                compressors=zarr_compressor(storage["codec"], int(storage["level"]), spec.name),
+                compressors=zarr_compressor(*codec, spec.name, np.dtype(spec.dtype).itemsize),
                 attributes={"unit": spec.unit, "channels": list(spec.channels)},
             )
         self._arrays = {}
@@ -722,6 +709,19 @@ class DatasetStore:
                 self._encoders_pid = os.getpid()
             return self._encoders
 
+    def _batch_compressor(self) -> Any:
+        """This process's GPU batch compressor (None: numcodecs, chunk by chunk)."""
+        return _codecs.process_compressor(self.description) if self.storage == "zarr" else None
+
+    def encoder_name(self) -> str:
+        """Who encodes this process's shards (``"nvcomp 6.0.0.12"``, ``"numcodecs ..."``)."""
+        return _codecs.encoder_name(self._batch_compressor(), self.storage)
+
+    def add_encoders(self, encoders: list[str]) -> None:
+        """Add the encoders that wrote a run's shards to ``dataset.json`` (under its lock)."""
+        if _codecs.merge_encoding(self.description, encoders):
+            write_json_atomic(self.path / DESCRIPTION_FILE, self.description)
+
     def _zarr_arrays(self) -> dict[str, Any]:
         with _OPEN_LOCK:
             return self._zarr_arrays_locked()
@@ -733,8 +733,9 @@ class DatasetStore:
 
         if not self._arrays or self._pid != os.getpid():
             try:
-                group = zarr.open_group(self.path, mode="r+")
-                opened = {spec.name: group[spec.name] for spec in self.layout}
+                with quiet_numcodecs():
+                    group = zarr.open_group(self.path, mode="r+")
+                    opened = {spec.name: group[spec.name] for spec in self.layout}
             except Exception as error:  # zarr raises many types for missing or bad metadata
                 raise InputError(
                     f"store {self.path}", "Zarr arrays for the layout of its dataset.json",

@@ -1,0 +1,594 @@
+"""How a store's chunks are compressed: the Zarr codecs of each ``storage.codec``, and who
+encodes the bytes -- numcodecs on the CPU, or nvCOMP on a GPU.
+
+**Stored format.** ``storage.codec`` decides the chunk codecs written in each array's
+``zarr.json`` (:func:`zarr_compressor`): Blosc (``blosc-zstd``, ``blosc-lz4``,
+``blosc-auto``), ``zstd``, ``shuffle-zstd`` (byte shuffle, then zstd) or none. A reader only
+needs ``zarr`` and numcodecs (a dependency of ``zarr``), whoever encoded the store.
+
+**Who encodes** (``storage.compress_on``, :data:`COMPRESS_ON`): ``cpu`` -- numcodecs, one
+zstd frame per chunk (the bytes every earlier store has); ``gpu`` -- nvCOMP's batched Zstd
+(:class:`NvcompZstdFrames`, ``pip install virtus-fpp[gpu]``); ``auto`` -- the GPU when
+nvCOMP and a CUDA device work here and the codec is one the GPU writes
+(:data:`GPU_CODECS`), else the CPU, saying why (:func:`plan_compression`).
+
+The GPU writes **standard zstd data** (RFC 8878: "compressed data is made of one or more
+frames"): nvCOMP's ``RAW`` bitstream kind is the algorithm's own format without nvCOMP's
+header, for Zstd a plain zstd frame. nvCOMP's batched API compresses many independent
+pieces side by side, one piece per thread block or warp (its header recommends 64 KiB
+pieces for speed), so one 48 MB chunk of frames would run on a sliver of the GPU: each
+chunk is cut into pieces of :data:`PIECE_BYTES` and its stored bytes are the pieces' frames
+one after the other. A zstd decoder reads concatenated frames as the concatenated data --
+numcodecs (what zarr-python's ``zstd`` codec calls) from **0.16.4** on: measured here,
+0.14.1, 0.15.1, 0.16.0 and 0.16.1 refuse a chunk of several frames ("Destination buffer is
+too small"), 0.16.2 and 0.16.3 read it only when the frames carry no content size, 0.16.4 to
+0.16.6 always (``tests/data/test_chunkcodecs.py`` checks both kinds, and nvCOMP's own bytes
+from ``tests/data/fixtures/nvcomp_zstd``). So a store written on the GPU needs numcodecs >=
+:data:`READER_NUMCODECS` to be read (``dataset.json``'s ``encoding`` says so); one written
+on the CPU, one frame a chunk, does not. :class:`CpuZstdFrames` writes the GPU layout with
+numcodecs: the GPU path's CPU twin, used by the tests.
+
+Measured on one 960 x 960 training sample of ``benchmarks/bench_dataset.py`` (52 frames of
+the ideal sensor, float32 labels: 132.7 MB raw), numcodecs zstd level 1, one thread of the
+shared 2-core VM (times +-20 %; ``benchmarks/bench_dataset.py --codecs`` prints these rows):
+
+===================================  ========  ======  =======
+chunk bytes                          stored    ratio   time
+===================================  ========  ======  =======
+zstd, one frame a chunk              51.5 MB   2.58    0.135 s
+zstd, frames of 256 KiB              51.5 MB   2.58    0.135 s
+zstd, frames of 64 KiB               51.7 MB   2.57    0.172 s
+byte shuffle, then zstd              35.3 MB   3.76    0.166 s
+byte shuffle, zstd frames of 256 KiB 35.3 MB   3.76    0.21 s
+byte shuffle, zstd frames of 64 KiB  35.9 MB   3.70    0.28 s
+blosc-zstd (shuffle, 1 MiB blocks)   35.5 MB   3.73    0.124 s
+===================================  ========  ======  =======
+
+So pieces of 256 KiB cost nothing in size (64 KiB: +0.4 %, shuffled +1.8 %), and the byte
+shuffle pays: the real-valued labels shrink by a third (the frames, one byte a pixel, do
+not change), 16 MB less to write a sample -- at 2,500 images/s (48 samples/s) 0.8 GB/s
+less disk traffic.
+Hence ``shuffle-zstd``: Zarr v3 has no shuffle of its own, so the chunk codecs are
+``bytes``, ``numcodecs.shuffle`` (elementsize = the dtype's size; one-byte arrays have none)
+and ``zstd``; zarr-python reads it through numcodecs (other Zarr implementations may not
+know ``numcodecs.shuffle``: use plain ``zstd`` for them). On the GPU the shuffle runs on the
+device when a CUDA build of torch is present, else on the host while the chunks are staged
+for the copy to the device (:func:`stage_on_host`: 40 ms a sample with the shuffle, 20 ms
+without, on the loaded 2-core VM -- against 0.17-0.21 s to compress the sample there).
+
+**Same seed, same arrays -- not the same bytes.** Checksums cover the decoded arrays
+(:func:`virtus.data.labels.sample_checksum`), so a GPU-encoded store holds exactly the
+arrays of a CPU-encoded one and every reader sees no difference, but its compressed bytes
+differ (another encoder, and pieces; whether nvCOMP gives the same bytes for the same input
+on every run is checked by ``scripts/make_nvcomp_fixture.py``, not assumed). A store may
+mix both (a run resumed with another ``compress_on``): each shard record names its
+``encoder``, and ``dataset.json``'s ``encoding`` lists every encoder a record names (shards
+written before encoders were recorded name none). Resuming is unaffected: ``compress_on``
+is not part of a store's identity.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import warnings
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from virtus.errors import BackendUnavailable, InputError, MissingDependency
+
+__all__ = [
+    "BLOSC_BLOCK_BYTES",
+    "COMPRESS_ON",
+    "GPU_CODECS",
+    "NVCOMP_REQUIREMENT",
+    "PIECE_BYTES",
+    "READER_NUMCODECS",
+    "STAGING_ALIGN",
+    "FAKE_NVCOMP_ENV",
+    "CompressionPlan",
+    "CpuZstdFrames",
+    "NvcompZstdFrames",
+    "cpu_encoder_name",
+    "encode_samples",
+    "encoder_name",
+    "encoding_description",
+    "make_gpu_compressor",
+    "merge_encoding",
+    "process_compressor",
+    "recorded_encoders",
+    "piece_bounds",
+    "plan_compression",
+    "quiet_numcodecs",
+    "regroup",
+    "shuffle_bytes",
+    "stage_on_host",
+    "staging_layout",
+    "zarr_compressor",
+]
+
+#: Who encodes a store's chunks (module docstring).
+COMPRESS_ON = ("auto", "cpu", "gpu")
+#: Codecs whose chunks the GPU writes (standard zstd frames; ``shuffle-zstd`` shuffled first).
+GPU_CODECS = ("zstd", "shuffle-zstd")
+#: Uncompressed bytes per zstd frame on the GPU path (and its CPU twin): 256 KiB pieces
+#: compress as small as whole chunks (module docstring's table) and give nvCOMP ~500
+#: independent pieces a sample to work on side by side.
+PIECE_BYTES = 1 << 18
+#: The oldest numcodecs that reads a chunk of several zstd frames (module docstring).
+READER_NUMCODECS = "0.16.4"
+#: The package that ``compress_on: gpu`` needs (the ``gpu`` extra of pyproject.toml).
+NVCOMP_REQUIREMENT = "nvidia-nvcomp-cu13==6.0.0.12"
+#: Blosc block size (bytes) of a new store. Blosc's own choice at level 1 is a few tens of
+#: kB; 1 MiB blocks compress a 960 x 960 sample about 1.7x faster and 14 % smaller with
+#: blosc-zstd (blosc-auto: 1.6x faster, 6 % smaller). A store keeps the block size it was
+#: made with (it is in each array's Zarr metadata, which the shard writer follows).
+BLOSC_BLOCK_BYTES = 1 << 20
+#: Testing hook: ``1`` makes :class:`CpuZstdFrames` stand in for nvCOMP (in spawned workers
+#: too), so the GPU path -- plan, batch, pieces, records -- runs in CI without a GPU.
+FAKE_NVCOMP_ENV = "VIRTUS_FAKE_NVCOMP"
+#: zarr-python's warning for ``numcodecs.*`` codecs (``shuffle-zstd``), said once here.
+_NUMCODECS_WARNING = "Numcodecs codecs are not in the Zarr version 3 specification"
+
+
+def zarr_compressor(codec: str, level: int, array: str, itemsize: int = 1) -> Any:
+    """The Zarr compressor(s) of array ``array`` (``itemsize`` bytes an element) for a
+    store's ``storage.codec`` and ``level`` (:data:`~virtus.data.config.CODECS`; None:
+    stored raw). ``blosc-auto`` compresses the frames with blosc-zstd and every label with
+    blosc-lz4: zstd makes the frames much smaller than lz4 does, while most real-valued
+    labels come out nearly as small with lz4 at a fraction of zstd's time. At 960 x 960,
+    level 1, one thread: blosc-zstd 0.19 s and 35 MB a sample, blosc-auto 0.12 s and 39 MB
+    (``benchmarks/bench_dataset.py --codecs``); on the 2-core benchmark machine both give
+    the same images/s within its noise, so the default stays the smaller blosc-zstd.
+    ``shuffle-zstd``: ``[numcodecs.shuffle, zstd]`` for multi-byte arrays (module
+    docstring), plain zstd for one-byte ones."""
+    from zarr.codecs import BloscCodec, ZstdCodec
+
+    if codec == "none":
+        return None
+    if codec == "zstd":
+        return ZstdCodec(level=level)
+    if codec == "shuffle-zstd":
+        if itemsize <= 1:
+            return ZstdCodec(level=level)
+        try:
+            from zarr.codecs.numcodecs import Shuffle  # zarr >= 3.1.3
+        except ImportError:
+            from numcodecs.zarr3 import Shuffle  # older zarr: the same codec, numcodecs' name
+
+        return [Shuffle(elementsize=itemsize), ZstdCodec(level=level)]
+    if codec == "blosc-auto":
+        codec = "blosc-zstd" if array == "frames" else "blosc-lz4"
+    cname = codec.removeprefix("blosc-")
+    return BloscCodec(cname=cname, clevel=level, shuffle="shuffle", blocksize=BLOSC_BLOCK_BYTES)
+
+
+@contextlib.contextmanager
+def quiet_numcodecs() -> Iterator[None]:
+    """Silence zarr-python's "not in the Zarr v3 specification" warning for the
+    ``numcodecs.shuffle`` codec of ``shuffle-zstd`` stores (the module docstring says it);
+    a context manager or a decorator."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=_NUMCODECS_WARNING)
+        yield
+
+
+def shuffle_bytes(raw: np.ndarray, elementsize: int) -> np.ndarray:
+    """Byte shuffle as numcodecs' ``Shuffle`` does it: byte ``b`` of every element, for
+    ``b = 0 .. elementsize - 1``, one after the other.
+
+    Parameters
+    ----------
+    raw : (n * elementsize,) uint8, C-contiguous (whole elements).
+    elementsize : bytes an element (<= 1: ``raw`` itself).
+    """
+    if elementsize <= 1:
+        return raw
+    if raw.size % elementsize:
+        raise ValueError(f"{raw.size} bytes are not whole elements of {elementsize} bytes")
+    return np.ascontiguousarray(raw.reshape(-1, elementsize).T).reshape(-1)
+
+
+def piece_bounds(size: int, piece_bytes: int = PIECE_BYTES) -> list[tuple[int, int]]:
+    """``(start, stop)`` byte ranges cutting ``size`` bytes into pieces of ``piece_bytes``
+    (the last one shorter); one empty piece for ``size == 0``."""
+    if piece_bytes < 1:
+        raise ValueError(f"piece_bytes must be >= 1, got {piece_bytes}")
+    return [(a, min(a + piece_bytes, size)) for a in range(0, max(size, 1), piece_bytes)]
+
+
+def cpu_encoder_name() -> str:
+    """``"numcodecs X.Y.Z"``: who encodes on the CPU."""
+    import numcodecs
+
+    return f"numcodecs {numcodecs.__version__}"
+
+
+def encoder_name(compressor: Any, storage: str = "zarr") -> str:
+    """Who encodes a store's shards in this process: the batch ``compressor``'s name
+    (``"nvcomp 6.0.0.12"``), else numcodecs (:func:`cpu_encoder_name`); ``"png"`` for PNG
+    storage."""
+    if storage != "zarr":
+        return "png"
+    return getattr(compressor, "name", None) or cpu_encoder_name()
+
+
+class CpuZstdFrames:
+    """The GPU path's layout made with numcodecs on the CPU (its twin in the tests): each
+    chunk (shuffled when asked) cut into :data:`PIECE_BYTES` pieces, one zstd frame each,
+    concatenated -- through the same staging, carving and regrouping as
+    :class:`NvcompZstdFrames`.
+
+    Parameters
+    ----------
+    level : zstd level.
+    piece_bytes : uncompressed bytes a frame (default :data:`PIECE_BYTES`).
+    """
+
+    def __init__(self, level: int = 1, piece_bytes: int | None = None) -> None:
+        from numcodecs import Zstd
+
+        self._zstd = Zstd(level=level)
+        self.piece_bytes = piece_bytes or PIECE_BYTES
+        self.name = f"{cpu_encoder_name()} (zstd frames of {self.piece_bytes} bytes)"
+
+    def encode_chunks(self, chunks: Sequence[np.ndarray], elementsizes: Sequence[int]) -> list:
+        """The stored bytes of each chunk: staged, pieces cut and regrouped exactly as
+        :class:`NvcompZstdFrames` does it on the host path, each piece compressed here.
+
+        Parameters
+        ----------
+        chunks : (n_k,) uint8 arrays, a chunk's bytes each (little endian).
+        elementsizes : byte-shuffle element size per chunk (<= 1: no shuffle).
+        """
+        if not chunks:
+            return []
+        starts, pieces, end = staging_layout([raw.size for raw in chunks], self.piece_bytes)
+        staging = np.empty(end, np.uint8)
+        stage_on_host(chunks, elementsizes, starts, staging)
+        frames = [self._zstd.encode(staging[o : o + n]) for o, n in pieces]
+        return regroup(frames, [raw.size for raw in chunks], self.piece_bytes)
+
+
+def regroup(frames: Sequence[Any], sizes: Sequence[int], piece_bytes: int) -> list[bytes]:
+    """Each chunk's stored bytes: its pieces' frames (``frames`` in chunk order, as
+    :func:`staging_layout` lists the pieces) one after the other."""
+    out, first = [], 0
+    for size in sizes:
+        count = len(piece_bounds(size, piece_bytes))
+        out.append(b"".join(memoryview(f) for f in frames[first : first + count]))
+        first += count
+    if first != len(frames):
+        raise ValueError(f"{len(frames)} frames for {first} pieces")
+    return out
+
+
+#: Byte alignment of every chunk in a staging buffer (nvCOMP's Zstd needs 4; 16 is what its
+#: documentation advises when in doubt). Pieces inside a chunk start at multiples of the
+#: piece size, itself a multiple of this.
+STAGING_ALIGN = 16
+
+
+def staging_layout(
+    sizes: Sequence[int], piece_bytes: int
+) -> tuple[list[int], list[tuple[int, int]], int]:
+    """Where chunks of ``sizes`` bytes sit in one staging buffer: each chunk's start
+    (aligned to :data:`STAGING_ALIGN`), every piece's ``(offset, length)`` in chunk order,
+    and the buffer's length."""
+    if piece_bytes % STAGING_ALIGN:
+        raise ValueError(f"piece_bytes must be a multiple of {STAGING_ALIGN}, got {piece_bytes}")
+    starts, pieces, end = [], [], 0
+    for size in sizes:
+        start = -(-end // STAGING_ALIGN) * STAGING_ALIGN
+        starts.append(start)
+        pieces += [(start + a, b - a) for a, b in piece_bounds(size, piece_bytes)]
+        end = start + size
+    return starts, pieces, end
+
+
+def stage_on_host(
+    chunks: Sequence[np.ndarray], elementsizes: Sequence[int], starts: Sequence[int],
+    staging: np.ndarray,
+) -> None:  # fmt: skip
+    """Copy every chunk, byte-shuffled where its element size is > 1, to its ``start`` in
+    ``staging`` (uint8, at least the layout's length: :func:`staging_layout`)."""
+    for raw, size, start in zip(chunks, elementsizes, starts, strict=True):
+        target = staging[start : start + raw.size]
+        if size > 1:
+            target.reshape(size, -1)[...] = raw.reshape(-1, size).T
+        else:
+            target[...] = raw
+
+
+class NvcompZstdFrames:
+    """nvCOMP's batched Zstd on this process's CUDA device (``RAW`` bitstream: standard zstd
+    frames): all pieces of all chunks of one call compressed in one batch.
+
+    The chunks come from host memory (a shard buffer). They are gathered into one staging
+    buffer on the device (:func:`staging_layout`: chunk starts aligned, pieces carved from it
+    by offset): with a CUDA build of torch each chunk is copied up and byte-shuffled on the
+    device, else shuffled into a host staging buffer (:func:`stage_on_host`) that is copied
+    up at once. Staging buffers are kept per thread and grow as needed. nvCOMP's Zstd has
+    no level setting: ``level`` in ``zarr.json`` is the CPU's. An nvCOMP ``Codec`` must not
+    be used by two threads at once (its manager and scratch buffers), so each thread that
+    encodes makes its own (a pipelined run encodes on two).
+
+    Raises
+    ------
+    MissingDependency : nvCOMP's Python package is not installed.
+    BackendUnavailable : it is, but no CUDA device works with it here.
+    """
+
+    def __init__(self, piece_bytes: int | None = None) -> None:
+        import threading
+
+        self.piece_bytes = piece_bytes or PIECE_BYTES
+        staging_layout([1], self.piece_bytes)  # a piece size the staging can align
+        self._nvcomp = import_nvcomp()
+        self._local = threading.local()
+        self._codec()  # fails here, not in the first shard, without a usable device
+        self.name = f"nvcomp {self._nvcomp.__version__}"
+        self._torch = _cuda_torch()
+
+    def _codec(self) -> Any:
+        """This thread's nvCOMP Zstd codec (RAW bitstream), made on first use."""
+        codec = getattr(self._local, "codec", None)
+        if codec is None:
+            try:
+                codec = self._nvcomp.Codec(  # RAW: one input buffer, one frame
+                    algorithm="Zstd",
+                    bitstream_kind=self._nvcomp.BitstreamKind.RAW,
+                    uncomp_chunk_size=self.piece_bytes,  # the largest buffer it is given
+                )
+            except Exception as error:  # nvCOMP raises RuntimeError kinds without a device
+                raise BackendUnavailable(
+                    f"storage.compress_on gpu: nvCOMP finds no usable CUDA device ({error}); "
+                    "use compress_on: cpu or auto"
+                ) from None
+            self._local.codec = codec
+        return codec
+
+    def _staging(self, kind: str, length: int, make: Any) -> Any:
+        """This thread's staging buffer ``kind`` of at least ``length`` bytes (kept)."""
+        buffer = getattr(self._local, kind, None)
+        if buffer is None or len(buffer) < length:
+            buffer = None  # the old one is freed first
+            buffer = make(max(length, 1))
+            setattr(self._local, kind, buffer)
+        return buffer
+
+    def _on_device(
+        self, chunks: Sequence[np.ndarray], sizes: Sequence[int], starts: list, end: int
+    ) -> Any:
+        """The chunks, shuffled where asked, at ``starts`` of one device buffer."""
+        torch = self._torch
+        if torch is None:
+            staging = self._staging("host", end, lambda n: np.empty(n, np.uint8))
+            stage_on_host(chunks, sizes, starts, staging)
+            return self._nvcomp.as_array(staging[:end]).cuda()
+        staging = self._staging(
+            "device", end, lambda n: torch.empty(n, dtype=torch.uint8, device="cuda")
+        )
+        for raw, size, start in zip(chunks, sizes, starts, strict=True):
+            source = torch.from_numpy(raw).to("cuda")
+            target = staging[start : start + raw.size]
+            if size > 1:
+                target.view(size, -1).copy_(source.view(-1, size).t())
+            else:
+                target.copy_(source)
+        torch.cuda.current_stream().synchronize()  # nvCOMP works on its own stream
+        return staging[:end]
+
+    def encode_chunks(self, chunks: Sequence[np.ndarray], elementsizes: Sequence[int]) -> list:
+        """The stored bytes of each chunk (as :meth:`CpuZstdFrames.encode_chunks`)."""
+        if not chunks:
+            return []
+        starts, pieces, end = staging_layout([raw.size for raw in chunks], self.piece_bytes)
+        device = self._on_device(chunks, elementsizes, starts, end)
+        batch = self._nvcomp.as_arrays(device, [o for o, _ in pieces], [n for _, n in pieces])
+        encoded = self._codec().encode(batch).cpu()
+        frames = [np.asarray(encoded[i]).view(np.uint8) for i in range(len(encoded))]
+        out = regroup(frames, [raw.size for raw in chunks], self.piece_bytes)
+        del batch, device  # the staging buffer is free for the next call once encoded
+        return out
+
+
+def import_nvcomp() -> Any:
+    """``nvidia.nvcomp``, or :class:`MissingDependency` saying how to install it."""
+    try:
+        from nvidia import nvcomp
+    except ImportError:
+        raise MissingDependency(
+            f"GPU compression (storage.compress_on) needs nvCOMP's Python package: pip install "
+            f"'virtus-fpp[gpu]' (or {NVCOMP_REQUIREMENT})"
+        ) from None
+    return nvcomp
+
+
+def _cuda_torch() -> Any:
+    """torch when it is a CUDA build with a device here, else None (never required)."""
+    try:
+        import torch
+
+        return torch if torch.cuda.is_available() else None
+    except Exception:  # not installed, or a build whose libraries do not load here
+        return None
+
+
+@dataclass(frozen=True)
+class CompressionPlan:
+    """Who encodes a run's chunks (:func:`plan_compression`).
+
+    Attributes
+    ----------
+    on : ``"gpu"`` or ``"cpu"``.
+    encoder : ``"nvcomp 6.0.0.12"`` or ``"numcodecs 0.16.6"``.
+    note : why ``auto`` chose the CPU (None otherwise).
+    """
+
+    on: str
+    encoder: str
+    note: str | None = None
+
+
+def plan_compression(codec: str, compress_on: str, probe: Any = None) -> CompressionPlan:
+    """Decide who encodes: ``cpu``; ``gpu`` (refused, in one line, without nvCOMP, without a
+    CUDA device or for a codec the GPU does not write); ``auto`` the GPU when it works and
+    ``codec`` is in :data:`GPU_CODECS`, else the CPU with a note saying why.
+
+    ``probe`` makes the GPU compressor (default :class:`NvcompZstdFrames`; the tests pass a
+    fake). Each worker process makes its own from the plan (:mod:`virtus.data.store`).
+
+    Raises
+    ------
+    InputError : ``compress_on`` unknown, or ``gpu`` with a codec the GPU does not write.
+    MissingDependency, BackendUnavailable : ``gpu`` without nvCOMP, or without a device.
+    """
+    if compress_on not in COMPRESS_ON:
+        raise InputError("storage.compress_on", f"one of {', '.join(COMPRESS_ON)}", compress_on)
+    cpu = cpu_encoder_name()
+    if compress_on == "cpu":
+        return CompressionPlan("cpu", cpu)
+    if codec not in GPU_CODECS:
+        if compress_on == "gpu":
+            raise InputError(
+                "storage.compress_on gpu", f"storage.codec {' or '.join(GPU_CODECS)}", codec
+            )
+        return CompressionPlan("cpu", cpu, f"codec {codec} is encoded on the CPU (the GPU "
+                               f"writes {' and '.join(GPU_CODECS)})")  # fmt: skip
+    try:
+        gpu = (probe or _gpu_factory())()
+    except (MissingDependency, BackendUnavailable) as error:
+        if compress_on == "gpu":
+            raise
+        return CompressionPlan("cpu", cpu, f"compressing on the CPU: {error}")
+    return CompressionPlan("gpu", gpu.name)
+
+
+def encoding_description(
+    codec: str, level: int, compress_on: str, encoders: Sequence[str]
+) -> dict[str, Any]:
+    """``dataset.json``'s ``encoding``: the stored bytes' format (codec, level, shuffle,
+    zstd frames a chunk), the ``compress_on`` of the latest run and every encoder that wrote
+    to the store (each shard record names its own)."""
+    shuffle = None
+    if codec == "shuffle-zstd":
+        shuffle = "numcodecs.shuffle of multi-byte arrays"
+    elif codec.startswith("blosc"):
+        shuffle = "blosc byte shuffle"
+    frames = None
+    if codec in GPU_CODECS:
+        frames = (
+            "one or more standard zstd frames a chunk (RFC 8878): numcodecs >= "
+            f"{READER_NUMCODECS} reads several"
+        )
+    return {
+        "codec": codec,
+        "level": level,
+        "shuffle": shuffle,
+        "zstd_frames": frames,
+        "compress_on": compress_on,
+        "encoders": sorted(set(encoders)),
+    }
+
+
+def _gpu_factory() -> Any:
+    """What makes the GPU compressor: :class:`NvcompZstdFrames`, or its CPU twin named
+    ``fake-nvcomp`` under :data:`FAKE_NVCOMP_ENV`."""
+    if os.environ.get(FAKE_NVCOMP_ENV) == "1":
+
+        def fake() -> CpuZstdFrames:
+            twin = CpuZstdFrames()
+            twin.name = f"fake-nvcomp ({twin.name})"
+            return twin
+
+        return fake
+    return NvcompZstdFrames
+
+
+def make_gpu_compressor(compress_on: str, codec: str) -> Any:
+    """The batch compressor this process uses for a store (None: numcodecs, chunk by chunk):
+    None for ``cpu`` or a codec not in :data:`GPU_CODECS`; for ``gpu`` the GPU's (errors
+    raise: :func:`plan_compression` checked it before the run); for ``auto`` the GPU's, or
+    None where it cannot be made (each shard record names who encoded it)."""
+    if compress_on == "cpu" or codec not in GPU_CODECS:
+        return None
+    try:
+        return _gpu_factory()()
+    except (MissingDependency, BackendUnavailable):
+        if compress_on == "gpu":
+            raise
+        return None
+
+
+def encode_samples(
+    encoders: dict[str, Any], samples: Sequence[dict[str, np.ndarray]], compressor: Any
+) -> list[dict[str, Any]]:
+    """Every stored chunk of ``samples`` (name -> array each): name -> bytes (None: only the
+    fill value) per sample, for the arrays with a shard encoder
+    (:class:`~virtus.data.shards.ShardEncoder`). The zstd ones in one batch of
+    ``compressor`` (:meth:`NvcompZstdFrames.encode_chunks`); the others, and all without a
+    ``compressor``, by their own numcodecs codecs."""
+    out: list[dict[str, Any]] = [{} for _ in samples]
+    batch, places = [], []
+    for k, sample in enumerate(samples):
+        for name, encoder in encoders.items():
+            if encoder is None:
+                continue
+            if compressor is None or encoder.codec_name != "zstd":
+                out[k][name] = encoder.encode(sample[name])
+                continue
+            raw = encoder.raw(sample[name])
+            out[k][name] = None
+            if raw is not None:
+                batch.append((raw, encoder.shuffle))
+                places.append((k, name))
+    if batch:
+        chunks = compressor.encode_chunks([b[0] for b in batch], [b[1] for b in batch])
+        for (k, name), data in zip(places, chunks, strict=True):
+            out[k][name] = data
+    return out
+
+
+def merge_encoding(description: dict[str, Any], encoders: Sequence[str]) -> bool:
+    """Add ``encoders`` to a ``dataset.json`` description's ``encoding`` (a store extended,
+    resumed, or written by more than one encoder); whether it changed (False without an
+    ``encoding``: a store written before it was recorded)."""
+    encoding = description.get("encoding")
+    if not isinstance(encoding, dict):
+        return False
+    new = sorted(set(recorded_encoders(description)) | set(encoders))
+    if new == encoding.get("encoders"):
+        return False
+    description["encoding"] = {**encoding, "encoders": new}
+    return True
+
+
+def recorded_encoders(description: Any) -> list[str]:
+    """The encoders a ``dataset.json`` description lists (none for a missing or malformed
+    ``encoding``)."""
+    encoding = description.get("encoding") if isinstance(description, dict) else None
+    encoders = encoding.get("encoders") if isinstance(encoding, dict) else None
+    return [e for e in encoders if isinstance(e, str)] if isinstance(encoders, list) else []
+
+
+#: Per process: ((compress_on, codec), its batch compressor or None), made once.
+_PROCESS_COMPRESSOR: dict[int, tuple[Any, Any]] = {}
+
+
+def process_compressor(description: dict[str, Any]) -> Any:
+    """This process's batch compressor for a store's ``dataset.json`` description (its
+    ``encoding.compress_on``, ``cpu`` for a store without one; its codec), made once a
+    process (:func:`make_gpu_compressor`; None: numcodecs, chunk by chunk)."""
+    encoding = description.get("encoding")
+    on = encoding.get("compress_on") if isinstance(encoding, dict) else None
+    key = (on if on in COMPRESS_ON else "cpu", description["config"]["storage"]["codec"])
+    fake = os.environ.get(FAKE_NVCOMP_ENV)  # the testing hook may change within a process
+    made = _PROCESS_COMPRESSOR.get(os.getpid())
+    if made is None or made[0] != (key, fake):
+        _PROCESS_COMPRESSOR.clear()  # a forked child's entry is its parent's
+        made = _PROCESS_COMPRESSOR[os.getpid()] = ((key, fake), make_gpu_compressor(*key))
+    return made[1]
