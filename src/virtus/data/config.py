@@ -48,14 +48,15 @@ number; lists of choices are drawn uniformly per sample)::
     board: {spec: "4x7"}                                      # calibration mode
     ablation: {materials: [matte, glossy, metal, reflective], ambients: [dark, ambient]}
     storage: {shard_samples: 8, codec: blosc-zstd, level: 1, label_dtype: float32,
-              compress_on: auto}             # auto | cpu | gpu (zstd, shuffle-zstd only)
+              compress_on: cpu}              # cpu | gpu | auto (gpu: zstd, shuffle-zstd only)
 
 Units: metres, degrees where a key says ``_deg``, projector px for periods.
 
 ``storage.compress_on`` says who compresses, not what is stored: ``cpu`` (numcodecs),
 ``gpu`` (nvCOMP, ``pip install virtus-fpp[gpu]``; only for the codecs ``zstd`` and
 ``shuffle-zstd``, refused without nvCOMP or a CUDA device) or ``auto`` (the GPU where that
-works, else the CPU, and the run says so). The arrays are the same either way, so it is not
+works, else the CPU, and the run says so). The default is ``cpu``: on one H200 host with 8
+workers the GPU's zstd was the slower (:mod:`virtus.data.chunkcodecs`). The arrays are the same either way, so it is not
 part of a store's identity: a store may be resumed with another one
 (:mod:`virtus.data.chunkcodecs`).
 """
@@ -431,7 +432,7 @@ class DatasetConfig:
     codec: str = "blosc-zstd"
     level: int = 1
     label_dtype: str = "float32"
-    compress_on: str = "auto"
+    compress_on: str = "cpu"
 
     # -- reading ------------------------------------------------------------------------
 
@@ -504,7 +505,7 @@ class DatasetConfig:
         codec = storage.get("codec", "blosc-zstd")
         if codec not in CODECS:
             raise InputError("storage.codec", f"one of {', '.join(CODECS)}", codec)
-        compress_on = _compress_on(storage.get("compress_on", "auto"), codec)
+        compress_on = _compress_on(storage.get("compress_on", "cpu"), codec)
         label_dtype = storage.get("label_dtype", "float32")
         if label_dtype not in ("float32", "float64"):
             raise InputError("storage.label_dtype", "float32 or float64", label_dtype)
