@@ -9,6 +9,8 @@ One concept per module:
 * :mod:`virtus.data.labels` -- the arrays of a sample, labels exact from the ground truth.
 * :mod:`virtus.data.store` -- the sharded Zarr v3 (or PNG) store and its manifest
   (:class:`DatasetStore`; layout in its docstring).
+* :mod:`virtus.data.chunkcodecs` -- how chunks are compressed and who encodes them
+  (numcodecs on the CPU, nvCOMP on a GPU; the stored format is plain Zarr either way).
 * :mod:`virtus.data.integrity` -- what a store's description, records and samples must be
   to be read (:class:`DamagedSample`: every read is checked against its checksum).
 * :mod:`virtus.data.generate` -- rendering missing shards here, in processes or on Ray
