@@ -14,10 +14,17 @@ default rig, in one run:
 * **new poses**: ``--poses`` camera poses never rendered before (small turns about the
   object, as a calibration's or a dataset's poses differ), each with its wall time and the
   kernels it compiled. A kernel whose source bakes in a per-pose value compiles again for
-  every pose; none should after the first.
+  every pose; none should after the first;
+* with ``--agreement``, one noisy capture on this backend and on ``llvm_ad_rgb``, decoded:
+  phase RMS difference and fringe orders (the CPU-GPU check).
 
     PYTHONPATH=src python benchmarks/bench_profile.py [--variant llvm_ad_rgb] [--scene default]
         [--size 960] [--spp 4] [--lookup nearest] [--repeats 5] [--poses 6] [--json out.json]
+
+**Old against new** (``--baseline DIR --rounds N``): the same profile of this checkout and of
+another virtus source tree (``DIR/src``, e.g. ``git archive <commit> src | tar -x -C DIR``),
+each in its own process, alternated N times on the same machine; prints each stage's range
+for both and the per-round ratios (baseline / this checkout), so machine load hits both alike.
 
 On a GPU: ``--variant cuda_ad_rgb`` (the default when CUDA works). ``--size`` crops the
 camera around its centre (the same pixel footprint, fewer pixels) for a quick look.
@@ -32,6 +39,8 @@ import os
 import platform
 import random
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -39,6 +48,7 @@ from typing import Any
 
 import numpy as np
 
+import virtus
 from virtus.geometry.devices import Camera, Rig, default_rig
 from virtus.geometry.optics import Intrinsics
 from virtus.geometry.transforms import Pose
@@ -111,25 +121,29 @@ def profiled(dr: Any, function: Any) -> tuple[Any, dict[str, float]]:
     return result, kernel_account(history)
 
 
-def median_ms(dr: Any, function: Any, repeats: int) -> float:
-    times = []
+def median_ms(dr: Any, function: Any, repeats: int) -> tuple[float, float]:
+    """Median wall and process CPU milliseconds of ``function()`` (the device synchronised).
+    The CPU time of all threads is less sensitive to other jobs on a shared machine: on a
+    CPU variant, CPU time / Dr.Jit's thread count estimates the wall time on idle cores."""
+    times, cpu = [], []
     for _ in range(repeats):
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         function()
         dr.sync_thread()
         times.append(time.perf_counter() - start)
-    return 1e3 * statistics.median(times)
+        cpu.append(time.process_time() - start_cpu)
+    return 1e3 * statistics.median(times), 1e3 * statistics.median(cpu)
 
 
 def stage_table(dr: Any, stages: dict[str, Any], repeats: int) -> dict[str, dict[str, float]]:
-    """Per stage: median wall milliseconds, and the kernel account of one more run."""
+    """Per stage: median wall and CPU milliseconds, and the kernel account of one more run."""
     out = {}
     for name, function in stages.items():
         function()  # warm: compiles what this stage alone needs
         dr.sync_thread()
-        wall = median_ms(dr, function, repeats)
+        wall, cpu = median_ms(dr, function, repeats)
         _, account = profiled(dr, function)
-        out[name] = {"wall_ms": wall, **account}
+        out[name] = {"wall_ms": wall, "cpu_ms": cpu, **account}
     return out
 
 
@@ -204,6 +218,47 @@ def mitsuba_frames_per_s(rig, scene, sequence, settings, lookup: str, frames: in
     return 1.0 / statistics.median(times)
 
 
+def cpu_gpu_agreement(rig, scene, sequence, spp: int, variant: str) -> dict[str, Any]:  # noqa: ANN001
+    """The same noisy capture (``imx174`` sensor, ``lightcrafter`` projector, seed 0) rendered
+    on the device path of ``variant`` and of its CPU twin ``llvm_ad_rgb``, both decoded on the
+    host: RMS difference of the absolute phases (rad) where both are valid, the share of those
+    pixels whose fringe order differs, and the share of pixels valid in one only."""
+    from virtus.sensor.camera import SENSOR_PRESETS
+    from virtus.sensor.projector import PROJECTOR_PRESETS
+
+    decoded = {}
+    for name in (variant, "llvm_ad_rgb"):
+        rendering = render(
+            rig, scene, sequence, RenderSettings(spp=spp, variant=name), synthesis="jit",
+            projector=PROJECTOR_PRESETS["lightcrafter"], sensor=SENSOR_PRESETS["imx174"], rng=0,
+        )  # fmt: skip
+        decoded[name] = sequence.decode(rendering.frames)
+    a, b = decoded[variant], decoded["llvm_ad_rgb"]
+    out: dict[str, Any] = {"variants": [variant, "llvm_ad_rgb"]}
+    for direction in ("v", "h"):
+        phase_a, phase_b = getattr(a, f"phase_{direction}"), getattr(b, f"phase_{direction}")
+        both = getattr(a, f"mask_{direction}") & getattr(b, f"mask_{direction}")
+        order_a = np.floor(phase_a[both] / (2 * np.pi))
+        order_b = np.floor(phase_b[both] / (2 * np.pi))
+        difference = phase_a[both] - phase_b[both]
+        out[direction] = {
+            "phase_rms_difference_rad": float(np.sqrt(np.mean(difference**2))),
+            "fringe_orders_differing": float(np.mean(order_a != order_b)),
+            "valid_in_one_only": float(np.mean(getattr(a, f"mask_{direction}")
+                                               ^ getattr(b, f"mask_{direction}"))),
+        }  # fmt: skip
+    return out
+
+
+def print_agreement(agreement: dict[str, Any]) -> None:
+    print(f"{agreement['variants'][0]} vs {agreement['variants'][1]}, one noisy capture:")
+    for direction in ("v", "h"):
+        row = agreement[direction]
+        print(f"  phase_{direction}: RMS difference {row['phase_rms_difference_rad']:.2e} rad, "
+              f"fringe orders differing {row['fringe_orders_differing']:.2%}, valid in one "
+              f"only {row['valid_in_one_only']:.3%}")  # fmt: skip
+
+
 def summarise_poses(poses: list[dict[str, float]]) -> dict[str, float]:
     later = poses[1:] or poses
     return {
@@ -217,10 +272,11 @@ def summarise_poses(poses: list[dict[str, float]]) -> dict[str, float]:
 
 def print_table(title: str, table: dict[str, dict[str, float]]) -> None:
     print(title)
-    print(f"  {'stage':24s} {'wall ms':>9s} {'launches':>9s} {'jit':>4s} {'compiled':>9s} "
-          f"{'codegen ms':>11s} {'compile ms':>11s} {'run ms':>8s}")  # fmt: skip
+    print(f"  {'stage':24s} {'wall ms':>9s} {'cpu ms':>8s} {'launches':>9s} {'jit':>4s} "
+          f"{'compiled':>9s} {'codegen ms':>11s} {'compile ms':>11s} {'run ms':>8s}")  # fmt: skip
     for name, row in table.items():
-        print(f"  {name:24s} {row['wall_ms']:9.2f} {row['launches']:9d} {row['jit_kernels']:4d} "
+        print(f"  {name:24s} {row['wall_ms']:9.2f} {row['cpu_ms']:8.1f} {row['launches']:9d} "
+              f"{row['jit_kernels']:4d} "
               f"{row['compiled']:9d} {row['codegen_ms']:11.2f} {row['compile_ms']:11.1f} "
               f"{row['run_ms']:8.2f}")  # fmt: skip
 
@@ -232,6 +288,85 @@ def print_poses(title: str, poses: list[dict[str, float]]) -> None:
     print(
         f"{title}\n  wall ms: {walls}\n  kernels compiled: {compiled}\n  compile ms: {compile_ms}"
     )
+
+
+def child_arguments(argv: list[str]) -> list[str]:
+    """``argv`` without the options that only the comparing parent reads."""
+    parent = ("--baseline", "--rounds", "--json")
+    out, skip = [], False
+    for item in argv:
+        if skip:
+            skip = False
+        elif item in parent:
+            skip = True
+        elif not item.startswith(tuple(f"{o}=" for o in parent)):
+            out.append(item)
+    return out
+
+
+def run_profile(source: Path, argv: list[str], out: Path) -> dict[str, Any]:
+    """This benchmark's report with the virtus of ``source`` (a tree holding ``src/``), run
+    in a fresh process."""
+    env = dict(os.environ, PYTHONPATH=str((source / "src").resolve()))
+    command = [sys.executable, __file__, *argv, "--json", str(out)]
+    subprocess.run(command, env=env, check=True, stdout=subprocess.DEVNULL)
+    report = json.loads(out.read_text())
+    if not report["virtus"].startswith(str(source.resolve())):
+        raise SystemExit(f"the run for {source} imported virtus from {report['virtus']}")
+    return report
+
+
+def compare(argv: list[str], baseline: Path, rounds: int) -> None:
+    """Profile this checkout and ``baseline`` alternately, ``rounds`` times each, and print
+    every device stage's range for both and the per-round ratios."""
+    here = Path(__file__).resolve().parents[1]
+    runs: dict[str, list[dict[str, Any]]] = {"new": [], "baseline": []}
+    plain = [a for a in argv if a != "--agreement"]  # the CPU-GPU check: once, this checkout
+    with tempfile.TemporaryDirectory() as folder:
+        for k in range(rounds):
+            for name, source in (("new", here), ("baseline", baseline)):
+                first_run = k == 0 and name == "new" and len(plain) < len(argv)
+                arguments = [*plain, "--agreement"] if first_run else plain
+                path = Path(folder) / f"{name}{k}.json"
+                runs[name].append(run_profile(source, arguments, path))
+                print(f"round {k + 1}/{rounds}: {name} done", flush=True)
+    first = runs["new"][0]
+    print(
+        f"machine: {first['machine']}; {first['variant']}; {first['scene']} scene, "
+        f"{first['frames']} frames, {first['camera_px'][0]} px, {first['spp']} spp, "
+        f"{first['lookup']}; {rounds} rounds alternated, median of each run's repeats"
+    )
+    for measure in ("wall_ms", "cpu_ms"):
+        print(f"  {measure:24s} {'this checkout':>16s} {'baseline':>16s} {'baseline/this':>14s}")
+        for stage in first["device_stages"]:
+            new = [r["device_stages"][stage][measure] for r in runs["new"]]
+            old = [r["device_stages"][stage][measure] for r in runs["baseline"]]
+            print(f"  {stage:24s} {span(new, '7.1f'):>16s} {span(old, '7.1f'):>16s} "
+                  f"{span(ratios(old, new), '.2f'):>14s}")  # fmt: skip
+    key = "frames_per_s_into_device_memory"
+    new, old = ([r[key] for r in runs[n]] for n in ("new", "baseline"))
+    print(
+        f"  frames/s into device memory: this checkout {span(new, '.0f')}, baseline "
+        f"{span(old, '.0f')} (x {span(ratios(new, old), '.2f')} per round)"
+    )
+    if "cpu_gpu_agreement" in first:
+        print_agreement(first["cpu_gpu_agreement"])
+    if "mitsuba_frames_per_s" in first:
+        mitsuba = [r["mitsuba_frames_per_s"] for r in runs["new"]]
+        print(
+            f"  per-frame Mitsuba in this checkout's runs: {span(mitsuba, '.1f')} frames/s "
+            f"(this checkout x {span(ratios(new, mitsuba), '.1f')} per run)"
+        )
+
+
+def span(values: list[float], spec: str) -> str:
+    """``min-max`` of ``values`` formatted with ``spec``."""
+    return f"{min(values):{spec}}-{max(values):{spec}}" if values else "-"
+
+
+def ratios(numerators: list[float], denominators: list[float]) -> list[float]:
+    """Pairwise ratios (pairs with a zero denominator left out)."""
+    return [n / d for n, d in zip(numerators, denominators, strict=True) if d > 0]
 
 
 def main() -> None:
@@ -248,7 +383,22 @@ def main() -> None:
         help="also time N frames of Mitsuba's projector emitter, one render per frame",
     )  # fmt: skip
     parser.add_argument("--json", type=Path, help="also write the numbers here")
+    parser.add_argument("--no-host", action="store_true", help="skip the host path of render()")
+    parser.add_argument(
+        "--agreement", action="store_true",
+        help="also render one noisy capture here and on llvm_ad_rgb and compare their decoding",
+    )  # fmt: skip
+    parser.add_argument(
+        "--baseline", type=Path, metavar="DIR",
+        help="also profile the virtus in DIR/src, alternating with this checkout (see above)",
+    )  # fmt: skip
+    parser.add_argument("--rounds", type=int, default=3, help="alternations with --baseline")
     args = parser.parse_args()
+    if args.baseline is not None:
+        if not (args.baseline / "src" / "virtus").is_dir():
+            parser.error(f"--baseline: expected a folder holding src/virtus, got {args.baseline}")
+        compare(child_arguments(sys.argv[1:]), args.baseline, max(args.rounds, 1))
+        return
 
     _, dr, variant = mitsuba(args.variant)
     rig, sequence = cropped_rig(args.size), default_sequence()
@@ -260,6 +410,7 @@ def main() -> None:
         "variant": variant, "scene": args.scene, "frames": n_frames,
         "camera_px": [rig.camera.width, rig.camera.height], "spp": args.spp,
         "lookup": args.lookup, "load_average_1min": [os.getloadavg()[0]],
+        "virtus": str(Path(virtus.__file__).resolve()),
     }  # fmt: skip
     with tempfile.TemporaryDirectory() as folder:
         scene = build_scene(args.scene, Path(folder))
@@ -278,7 +429,7 @@ def main() -> None:
         if args.mitsuba > 0:
             fps = mitsuba_frames_per_s(rig, scene, sequence, settings, args.lookup, args.mitsuba)
             report["mitsuba_frames_per_s"] = fps
-        if not variant.startswith("cuda"):
+        if not variant.startswith("cuda") and not args.no_host:
             host = stage_table(dr, host_stages(*models), args.repeats)
             report["host_stages"] = host
             report["frames_per_s_render"] = n_frames / host["render"]["wall_ms"] * 1e3
@@ -288,6 +439,9 @@ def main() -> None:
                               sensor=sensor, cam2world=cam2world, synthesis="sparse")  # fmt: skip
 
             report["host_new_poses"] = new_poses(host_pose, dr, max(args.poses, 2))
+        if args.agreement:
+            agreement = cpu_gpu_agreement(rig, scene, sequence, args.spp, variant)
+            report["cpu_gpu_agreement"] = agreement
     report["load_average_1min"].append(os.getloadavg()[0])
     for key in ("device_new_poses", "host_new_poses"):
         if key in report:
@@ -312,6 +466,8 @@ def main() -> None:
     print_poses("new poses, render_device:", report["device_new_poses"])
     if "host_new_poses" in report:
         print_poses("new poses, render():", report["host_new_poses"])
+    if "cpu_gpu_agreement" in report:
+        print_agreement(report["cpu_gpu_agreement"])
     if args.json:
         args.json.write_text(json.dumps(report, indent=2) + "\n")
 

@@ -5,8 +5,8 @@ Same definition (:data:`virtus.sensor.camera.NOISE_STREAM`): per frame a 64-bit 
 :func:`virtus.sensor.camera.stream_key`, the pcg4d hash (:func:`virtus.sensor.camera.pcg4d`, which
 runs
 unchanged on ``UInt32`` arrays) of ``(pixel, k0, k1, 0)``, Box-Muller. Keys are computed on
-the host (a few Python integers per frame) and gathered per lane, so one kernel draws the
-noise of every frame of a pose.
+the host (a few Python integers per frame) and gathered by frame inside the synthesis
+kernel's frame loop, so one kernel draws the noise of every frame of a pose.
 """
 
 from __future__ import annotations
@@ -37,27 +37,10 @@ def standard_normal_jit(mi: Any, dr: Any, k0: Any, k1: Any, pixel: Any) -> Any:
 
 
 @functools.lru_cache(maxsize=4)
-def _fixed_patterns(variant: str, sensor: Sensor, n_pixels: int) -> tuple[Any, Any]:
-    """The sensor's PRNU and DSNU maps as device arrays (uploaded once per sensor and size)."""
+def pixel_patterns(variant: str, sensor: Sensor, n_pixels: int) -> tuple[Any, Any]:
+    """The sensor's PRNU and DSNU maps as Float (P,) device arrays indexed by row-major pixel,
+    or None where the sensor has none (uploaded once per sensor and size)."""
     from virtus.render.backend import mitsuba
 
     mi, _, _ = mitsuba(variant)
     return tuple(None if m is None else mi.Float(m) for m in sensor.fixed_patterns(n_pixels))  # type: ignore[return-value]
-
-
-def noise_streams(
-    mi: Any, dr: Any, variant: str, sensor: Sensor, seed: int, frame: Any, pixel: Any,
-    n_pixels: int, frames: np.ndarray,
-) -> tuple[Any, Any, Any]:  # fmt: skip
-    """``(normal, prnu, dsnu)`` per lane for :meth:`virtus.sensor.camera.Sensor.emva`: lane ``i``
-    is pixel ``pixel[i]`` of the ``frame[i]``-th frame of ``frames`` (sequence indices)."""
-    k0, k1 = frame_keys(mi, seed, frames)
-    normal = standard_normal_jit(
-        mi, dr, dr.gather(mi.UInt32, k0, frame), dr.gather(mi.UInt32, k1, frame), pixel
-    )
-    prnu, dsnu = _fixed_patterns(variant, sensor, n_pixels)
-    if prnu is not None:
-        prnu = dr.gather(mi.Float, prnu, pixel)
-    if dsnu is not None:
-        dsnu = dr.gather(mi.Float, dsnu, pixel)
-    return normal, prnu, dsnu
