@@ -307,7 +307,9 @@ def child_arguments(argv: list[str]) -> list[str]:
 def run_profile(source: Path, argv: list[str], out: Path) -> dict[str, Any]:
     """This benchmark's report with the virtus of ``source`` (a tree holding ``src/``), run
     in a fresh process."""
-    env = dict(os.environ, PYTHONPATH=str((source / "src").resolve()))
+    # ``source`` first; the rest of PYTHONPATH (packages installed to a folder) stays
+    paths = [str((source / "src").resolve()), os.environ.get("PYTHONPATH", "")]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in paths if p))
     command = [sys.executable, __file__, *argv, "--json", str(out)]
     subprocess.run(command, env=env, check=True, stdout=subprocess.DEVNULL)
     report = json.loads(out.read_text())
