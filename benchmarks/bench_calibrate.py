@@ -3,21 +3,29 @@
 Runs the command as a user would (a fresh process: imports, Mitsuba start-up, capture,
 calibration, files) and reports its wall time against the issue's 60 s budget, then the
 library call twice in this process: the first compiles the kernels (and starts the
-observation workers), the second is the warm time (the GPU issue's "excluding interpreter
+observation threads), the second is the warm time (the GPU issue's "excluding interpreter
 and JIT start-up"), with the stages of the warm run (render + decode, detect + fit summed
 over the worker processes, calibration) and frames/s.
 
-Then, same process, alternating and repeated (``--repeat``): the whole library call with
-the observation of before issue 25 (one ``cv2.findHomography`` RANSAC fit per circle and
-the wrapped phase on a float64 copy of the whole stack) against today's (one batched fit
-for all circles, a blocked wrapped phase), both observing in this process so that the
-patch reaches them, with the calibration's RMS to 4 decimals; and the parts of one pose
-(host decode, wrapped phase of one phase set, local homographies, whole observation) on
-the first ``--parts-poses`` poses rendered on the host, with how far the old and new
-projector points are apart.
+Then, same process, alternating and repeated (``--repeat``): the whole library call as it
+was before the second round of issue 25 ("old": centroids refined circle by circle, poses
+observed in spawned worker processes on hosts of 4+ CPUs and here on smaller ones, whole
+frames decoded on the host) against today's ("new": every circle's centroid window in one
+batch, poses observed in threads of this process, only the board's window decoded on the
+host), with the stages, the CPU seconds, the calibration's RMS to 4 decimals and whether
+``calibration.json`` is byte-identical. Then the parts of one pose, old vs new (host
+decode of the whole frame; "frame/window": today's decode of the whole frame against that
+of the board's window; wrapped phase of one phase set; refined centroids; local
+homographies; whole observation; "old" is before issue 25 there: one
+``cv2.findHomography`` RANSAC fit per circle, the wrapped phase on a float64 copy of the
+whole stack, per-circle centroids) on the first ``--parts-poses`` poses rendered on the
+host, with how far the old and new projector points and centroids are apart. Last, the
+observation alone of ``--observer-poses`` poses rendered and decoded once: here, in 2, 4,
+... threads and in spawned processes (how observation scales with the host's cores,
+without the renderer beside it).
 
     PYTHONPATH=src python benchmarks/bench_calibrate.py [--board 7x13] [--repeat 3]
-        [--parts-poses 3] [--skip-cli] [--json out.json]
+        [--parts-poses 3] [--observer-poses 18] [--skip-cli] [--json out.json]
 
 Not a test: numbers depend on the machine (quote them with its description).
 """
@@ -33,7 +41,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -70,19 +78,55 @@ def wrapped_phase_before(frames: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
 
 @contextmanager
 def observation(kind: str) -> Iterator[None]:
-    """Run the block with the ``"old"`` (per-circle cv2, whole-stack phase) or ``"new"``
-    observation and host decode (patched in this process only)."""
-    from virtus.calib import observe, projector
+    """Run the block with the ``"old"`` (per-circle cv2 homographies, whole-stack phase,
+    per-circle centroids: before issue 25) or ``"new"`` observation and host decode
+    (patched in this process only)."""
+    from virtus.calib import detect, observe, projector
     from virtus.patterns import phase
 
-    saved = (observe.local_homographies, phase.wrapped_phase)
+    saved = (observe.local_homographies, phase.wrapped_phase, detect._centroids)
     if kind == "old":
         observe.local_homographies = projector.local_homographies_per_circle
         phase.wrapped_phase = wrapped_phase_before
+        detect._centroids = detect._centroids_per_circle
     try:
         yield
     finally:
-        observe.local_homographies, phase.wrapped_phase = saved
+        observe.local_homographies, phase.wrapped_phase, detect._centroids = saved
+
+
+def processes_before() -> int:
+    """Worker processes the calibration observed in by default before the second round of
+    issue 25: one per CPU beyond the renderer's, at most 8; none below 4 CPUs."""
+    cpus = os.cpu_count() or 1
+    return 0 if cpus < 4 else min(8, cpus - 1)
+
+
+def observe_timed_before(*arguments: Any) -> Any:
+    """``virtus.calib.observers.observe_timed`` with the per-circle centroids (in a worker
+    process too: spawned workers import this script, so the patch reaches them)."""
+    from virtus.calib import detect, observers
+
+    detect._centroids = detect._centroids_per_circle
+    return observers.observe_timed(*arguments)
+
+
+@contextmanager
+def calibration_before() -> Iterator[int]:
+    """The library call of before the second round (per-circle centroids, observed in
+    :func:`processes_before` processes, the whole frames decoded on the host); yields its
+    ``processes`` argument."""
+    from virtus.calib import detect
+    from virtus.pipeline import calibrate
+
+    saved = (calibrate.observe_timed, detect._centroids, calibrate.board_window)
+    calibrate.observe_timed = observe_timed_before
+    detect._centroids = detect._centroids_per_circle
+    calibrate.board_window = lambda *arguments: None  # the whole frame decoded
+    try:
+        yield processes_before()
+    finally:
+        calibrate.observe_timed, detect._centroids, calibrate.board_window = saved
 
 
 def spread(values: list[float]) -> str:
@@ -91,35 +135,53 @@ def spread(values: list[float]) -> str:
     return f"{lo * 1e3:.1f}-{hi * 1e3:.1f} ms" if hi < 1.0 else f"{lo:.2f}-{hi:.2f} s"
 
 
+def cpu_seconds() -> float:
+    """CPU seconds of this process (every thread) and of its ended child processes."""
+    times = os.times()
+    return times.user + times.system + times.children_user + times.children_system
+
+
 def compare_totals(board: str, repeat: int) -> dict[str, Any]:
-    """The library call with the old and the new observation, alternating, ``repeat``
-    times each, observing in this process: wall, stages and RMS per run."""
+    """The library call as before the second round of issue 25 and as now, alternating,
+    ``repeat`` times each: wall, stages and RMS per run, and whether the files agree."""
     from virtus.pipeline.calibrate import calibrate_rig
     from virtus.scanner import Scanner
 
     runs: dict[str, list[dict[str, Any]]] = {"old": [], "new": []}
+    same_files = True
     with tempfile.TemporaryDirectory() as tmp:
         for index in range(repeat):
             for kind in ("old", "new"):
-                with observation(kind):
-                    start = time.perf_counter()
-                    result = calibrate_rig(
-                        Scanner(), board=board, out_dir=Path(tmp) / f"{kind}{index}", processes=0
-                    )
-                    wall = time.perf_counter() - start
-                runs[kind].append({"s": wall, "stages_s": result.timing_s, "rms_px": result.rms_px})
-    print(f"\nold vs new observation, same process, {repeat} runs each (observed in this process)")
-    print(f"{'':<26} {'old':>17} {'new':>17} {'old/new':>9}")
-    keys = [("library total", None), *[(k, k) for k in ("render_s", "observe_s", "calibrate_s")]]
+                out = Path(tmp) / f"{kind}{index}"
+                with calibration_before() if kind == "old" else nullcontext(None) as processes:
+                    start, cpu = time.perf_counter(), cpu_seconds()
+                    result = calibrate_rig(Scanner(), board=board, out_dir=out, processes=processes)
+                    wall, cpu = time.perf_counter() - start, cpu_seconds() - cpu
+                runs[kind].append(
+                    {"s": wall, "cpu_s": cpu, "stages_s": result.timing_s, "rms_px": result.rms_px}
+                )
+            old_result = (Path(tmp) / f"old{index}" / "calibration.json").read_bytes()
+            same_files &= old_result == (out / "calibration.json").read_bytes()
+    before = processes_before()
+    print(
+        f"\nold (per-circle centroids, observed {f'in {before} processes' if before else 'here'},"
+        f" whole frames decoded) vs new (batched centroids, observed in threads, board window"
+        f" decoded), {repeat} runs each, alternating"
+    )
+    print(f"{'':<30} {'old':>17} {'new':>17} {'old/new':>9}")
+    stages = [(k, k) for k in ("render_s", "observe_s", "calibrate_s")]
+    keys = [("library total", "s"), ("CPU s (all threads+workers)", "cpu_s"), *stages]
     for label, key in keys:
-        old = [r["s"] if key is None else r["stages_s"][key] for r in runs["old"]]
-        new = [r["s"] if key is None else r["stages_s"][key] for r in runs["new"]]
+        old = [r[key] if key in r else r["stages_s"][key] for r in runs["old"]]
+        new = [r[key] if key in r else r["stages_s"][key] for r in runs["new"]]
         ratio = f"{min(old) / max(new):.2f}-{max(old) / min(new):.2f}"
-        print(f"{label:<26} {spread(old):>17} {spread(new):>17} {ratio:>9}")
+        name = label if key != "observe_s" else "observe_s (summed, workers)"
+        print(f"{name:<30} {spread(old):>17} {spread(new):>17} {ratio:>9}")
     rms = {kind: {k: round(v, 4) for k, v in runs[kind][0]["rms_px"].items()} for kind in runs}
     print(f"rms px old: {json.dumps(rms['old'])}\nrms px new: {json.dumps(rms['new'])}")
     print("same calibration to 4 decimals:", rms["old"] == rms["new"])
-    return runs
+    print("calibration.json byte-identical in every pair:", same_files)
+    return {**runs, "same_calibration_json": same_files}
 
 
 def _timed(function: Callable[[], Any], repeat: int) -> tuple[list[float], Any]:
@@ -133,12 +195,13 @@ def _timed(function: Callable[[], Any], repeat: int) -> tuple[list[float], Any]:
 
 def compare_parts(board_spec: str, n_poses: int, repeat: int) -> dict[str, Any]:
     """Per pose, old vs new, alternating: host decode, one phase set's wrapped phase,
-    local homographies, whole observation; and the old-new projector point difference."""
-    from virtus.calib import observe, projector
+    refined centroids, local homographies, whole observation; and the old-new projector
+    point and centroid differences."""
+    from virtus.calib import detect, observe, projector
     from virtus.calib.board import board_from_spec
     from virtus.calib.detect import find_grid
     from virtus.calib.poses import pose_set
-    from virtus.calib.scene import board_scene, board_texture
+    from virtus.calib.scene import board_scene, board_texture, board_window
     from virtus.patterns import phase
     from virtus.scanner import Scanner
 
@@ -147,32 +210,50 @@ def compare_parts(board_spec: str, n_poses: int, repeat: int) -> dict[str, Any]:
     kinds = [frame.kind for frame in scanner.sequence.frames]
     first_set = _one_phase_set([i for i, kind in enumerate(kinds) if kind == "phase"])
     times: dict[str, dict[str, list[float]]] = {}
-    worst = 0.0
+    worst = worst_centroid = 0.0
     for index, pose in enumerate(pose_set("paper", scanner.rig, board, 1)[:n_poses]):
         capture = scanner.capture(board_scene(board, pose, texture), rng=index, command=[])
         frames = capture.frames[first_set]
         white = capture.frames[kinds.index("white")] if "white" in kinds else None
         decoded = capture.decode()
         centres = find_grid(decoded.background if white is None else white, board)
-        points = {}
+        points, centroids = {}, {}
+        window = board_window(scanner.rig.camera.intrinsics, board, pose.board2cam)
+        window_frames = capture.frames[:, window[0], window[1]]
+        window_decode = partial(
+            scanner.sequence.decode, window_frames, full_scale=capture.full_scale
+        )
         observe_pose = partial(
             observe.observe_arrays, decoded.proj_uv, decoded.background, white, board, "p"
         )
         for _ in range(repeat):
-            for kind, fit, wrap in (
-                ("old", projector.local_homographies_per_circle, wrapped_phase_before),
-                ("new", projector.local_homographies, phase.wrapped_phase),
-            ):
+            for kind, fit, wrap, one_pass in (
+                ("old", projector.local_homographies_per_circle, wrapped_phase_before,
+                 detect._centroids_per_circle),
+                ("new", projector.local_homographies, phase.wrapped_phase, detect._centroids),
+            ):  # fmt: skip
                 part = times.setdefault(kind, {})
                 with observation(kind):
                     part.setdefault("host decode", []).extend(_timed(capture.decode, 1)[0])
                     part.setdefault("observe (all)", []).extend(_timed(observe_pose, 1)[0])
+                decode = capture.decode if kind == "old" else window_decode  # today's phase
+                seconds, _ = _timed(decode, 1)
+                part.setdefault("host decode: frame/window", []).extend(seconds)
                 seconds, _ = _timed(partial(wrap, frames), 1)
                 part.setdefault("wrapped phase (1 set)", []).extend(seconds)
                 seconds, homographies = _timed(partial(fit, decoded.proj_uv, board, centres), 1)
                 part.setdefault("local homographies", []).extend(seconds)
                 points[kind] = projector.apply_homographies(homographies, centres)
+                saved, detect._centroids = detect._centroids, one_pass
+                try:
+                    refine = partial(detect.refine_points, decoded.background, board, centres)
+                    seconds, centroids[kind] = _timed(refine, 1)
+                finally:
+                    detect._centroids = saved
+                part.setdefault("refined centroids", []).extend(seconds)
         worst = max(worst, float(np.nanmax(np.linalg.norm(points["old"] - points["new"], axis=1))))
+        moved = np.linalg.norm(centroids["old"] - centroids["new"], axis=1)
+        worst_centroid = max(worst_centroid, float(np.nanmax(moved)))
     print(f"\nparts of one pose, {n_poses} poses x {repeat} repeats, old vs new alternating")
     print(f"{'':<26} {'old':>17} {'new':>17} {'old/new (median)':>17}")
     for name in times["old"]:
@@ -180,7 +261,56 @@ def compare_parts(board_spec: str, n_poses: int, repeat: int) -> dict[str, Any]:
         ratio = np.median(old) / np.median(new)
         print(f"{name:<26} {spread(old):>17} {spread(new):>17} {ratio:>17.2f}")
     print(f"projector points, old - new: max {worst:.2e} px")
-    return {"times_s": times, "max_point_difference_px": worst}
+    print(f"refined centroids, old - new: max {worst_centroid:.2e} px")
+    return {
+        "times_s": times,
+        "max_point_difference_px": worst,
+        "max_centroid_difference_px": worst_centroid,
+    }
+
+
+def compare_observers(board_spec: str, n_poses: int, repeat: int) -> dict[str, Any]:
+    """Observation alone of ``n_poses`` poses rendered and decoded once (on the device if
+    there is one), wall time with each kind of observers: here, threads (2, 4, ... up to
+    the CPUs, and the default), and spawned processes as before (start-up included, as
+    in a calibration), alternating, ``repeat`` times each; and that they agree."""
+    from virtus.calib.board import board_from_spec
+    from virtus.calib.observers import Observers, observe_timed, observer_pool, observers
+    from virtus.calib.poses import pose_set
+    from virtus.calib.scene import board_scene, board_texture
+    from virtus.scanner import Scanner
+
+    scanner, board = Scanner(), board_from_spec(board_spec)
+    texture = board_texture(board)
+    views = []
+    for index, pose in enumerate(pose_set("paper", scanner.rig, board, 1)[:n_poses]):
+        view = scanner.decoded_view(board_scene(board, pose, texture), rng=index)
+        views.append((view.decoded.proj_uv, view.decoded.background, view.white, board, pose.name))
+    cpus = os.cpu_count() or 1
+    kinds = [Observers("here", 0)]
+    kinds += [Observers("threads", k) for k in (2, 4, 8, 16) if k <= cpus]
+    kinds += [observers(None)] if observers(None) not in kinds else []
+    kinds += [Observers("processes", max(processes_before(), 2))]
+    times: dict[str, list[float]] = {}
+    reference = None
+    for _ in range(repeat):
+        for chosen in kinds:
+            start = time.perf_counter()
+            with observer_pool(chosen) as pool:
+                jobs = [pool.submit(observe_timed, *view) for view in views]
+                found = [job.result()[0] for job in jobs]
+            times.setdefault(f"{chosen.kind} {chosen.count}", []).append(
+                time.perf_counter() - start
+            )
+            centroids = np.array([obs.cam_centroids for obs in found])
+            reference = centroids if reference is None else reference
+            if not np.array_equal(centroids, reference, equal_nan=True):
+                raise AssertionError(f"{chosen} observed other centroids")
+    print(f"\nobservation alone, {len(views)} decoded poses, {repeat} runs each, alternating")
+    base = float(np.median(times["here 0"]))
+    for name, values in times.items():
+        print(f"{name:<26} {spread(values):>17} {base / np.median(values):>8.2f}x")
+    return {"wall_s": times, "poses": len(views)}
 
 
 def _one_phase_set(phase_frames: list[int]) -> list[int]:
@@ -200,11 +330,17 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3, help="old/new runs each (default 3)")
     parser.add_argument("--parts-poses", type=int, default=3, help="poses timed part by part")
     parser.add_argument("--skip-cli", action="store_true", help="no fresh-process CLI run")
+    parser.add_argument(
+        "--observer-poses", type=int, default=18, help="poses of the observers' comparison"
+    )
     args = parser.parse_args()
     if not 1 <= args.repeat <= 20 or not 0 <= args.parts_poses <= 18:
         parser.error("--repeat must be in 1..20 and --parts-poses in 0..18")
+    if not 0 <= args.observer_poses <= 18:
+        parser.error("--observer-poses must be in 0..18")
 
-    from virtus.pipeline.calibrate import calibrate_rig, observe_processes
+    from virtus.calib.observers import observers
+    from virtus.pipeline.calibrate import calibrate_rig
     from virtus.render.backend import choose_variant
     from virtus.scanner import Scanner
 
@@ -219,10 +355,10 @@ def main() -> None:
         library_s = time.perf_counter() - start
     timing = result.timing_s  # run-dependent, so not in calibration.json (see timing.json)
     frames = result.settings["n_poses"] * result.settings["frames_per_pose"]
-    workers = observe_processes()
+    workers = observers(None)
     print(
         f"virtual calibration, board {args.board}, {frames} frames ({machine}), variant "
-        f"{choose_variant()}, observed in {workers or 'this'} process{'es' if workers else ''}"
+        f"{choose_variant()}, observed in {workers.count} {workers.kind}"
     )
     print(f"first library call (compiles kernels, starts workers): {first_s:.2f} s")
     print(f"{'stage (warm call)':<28} {'s':>7} {'share':>7} {'frames/s':>9}")
@@ -243,6 +379,8 @@ def main() -> None:
     print(f"rms px: {json.dumps({k: round(v, 4) for k, v in result.rms_px.items()})}")
     totals = compare_totals(args.board, args.repeat)
     parts = compare_parts(args.board, args.parts_poses, args.repeat) if args.parts_poses else None
+    observer_poses, board = args.observer_poses, args.board
+    scaling = compare_observers(board, observer_poses, args.repeat) if observer_poses else None
     if args.json is not None:
         args.json.write_text(
             json.dumps(
@@ -253,12 +391,13 @@ def main() -> None:
                     "cli_s": cli_s,
                     "library_first_s": first_s,
                     "library_s": library_s,
-                    "observe_processes": workers,
+                    "observers": [workers.kind, workers.count],
                     "stages_s": timing,
                     "budget_s": BUDGET_S,
                     "rms_px": result.rms_px,
-                    "old_vs_new_in_process": totals,
+                    "old_vs_new": totals,
                     "old_vs_new_parts": parts,
+                    "observation_alone": scaling,
                 },
                 indent=2,
             )

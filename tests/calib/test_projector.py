@@ -5,6 +5,8 @@ replaced, on a rendered board and on maps built here from known homographies (se
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -138,3 +140,15 @@ def test_a_circle_without_enough_decoded_pixels_is_nan_in_both_fits():
     np.testing.assert_array_equal(np.isnan(batched[:, 0, 0]), np.isnan(reference[:, 0, 0]))
     off_image = centres + 1e4  # every window off the image: all NaN, no error
     assert np.isnan(local_homographies(uv, BOARD, off_image)).all()
+
+
+def test_row_medians_of_degenerate_fits_are_nan_without_a_warning():
+    # Windows are fitted in observer threads, where silencing np.nanmedian's all-NaN
+    # warning with warnings.catch_warnings would race on the process's warning filters.
+    residual = np.array([[1.0, np.nan, 3.0, 2.0], [np.nan] * 4, [0.5, 0.5, np.nan, np.nan]])
+    filters = list(warnings.filters)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        median = projector._row_medians(residual)
+    np.testing.assert_array_equal(median, [[2.0], [np.nan], [0.5]])
+    assert warnings.filters == filters

@@ -16,12 +16,14 @@ import subprocess
 import sys
 import time
 import warnings
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from tests import tolerances as tol
+from virtus.calib import detect
 from virtus.calib.poses import BoardPose
 from virtus.errors import InputError, VirtusError
 from virtus.geometry.devices import Camera, Projector, Rig, default_rig
@@ -299,15 +301,69 @@ def test_fronto_parallel_poses_are_refused_not_solved(tmp_path):
     assert (tmp_path / "calibration.json").read_bytes() == written  # nothing replaced
 
 
-def test_observing_in_worker_processes_gives_the_same_files(tmp_path):
+def test_observing_in_worker_processes_or_threads_gives_the_same_files(tmp_path, monkeypatch):
     scanner = Scanner(rig=quarter_rig(), render=RenderSettings(spp=1))
     options = {"board": "4x7", "poses": f"random:{N_POSES}", "rng": 5}
     here = calibrate_rig(scanner, out_dir=tmp_path / "here", processes=0, **options)
     workers = calibrate_rig(scanner, out_dir=tmp_path / "workers", processes=2, **options)
+    threads = calibrate_rig(scanner, out_dir=tmp_path / "threads", **options)  # the default
     assert _contents(tmp_path / "workers") == _contents(tmp_path / "here")
-    assert workers.rms_px == here.rms_px
+    assert _contents(tmp_path / "threads") == _contents(tmp_path / "here")
+    assert workers.rms_px == here.rms_px == threads.rms_px
+    # As before the batched centroids (one window at a time): the same calibration.
+    with monkeypatch.context() as patch:
+        patch.setattr(detect, "_centroids", detect._centroids_per_circle)
+        before = calibrate_rig(scanner, processes=0, **options)
+    assert {k: round(v, 4) for k, v in before.rms_px.items()} == {
+        k: round(v, 4) for k, v in threads.rms_px.items()
+    }
+    for name in ("camera", "projector"):
+        was, now = (getattr(r.rig, name).intrinsics for r in (before, threads))
+        np.testing.assert_allclose(now.K, was.K, rtol=1e-9)
+        np.testing.assert_allclose(now.dist, was.dist, rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(threads.rig.proj2cam.t, before.rig.proj2cam.t, rtol=1e-9)
     with pytest.raises(InputError, match="processes"):
         calibrate_rig(scanner, processes=99, **options)
+
+
+def test_decoding_the_boards_window_gives_the_whole_frames_files(tmp_path, monkeypatch):
+    # On the host only the board's window is decoded (pipeline.calibrate._rendered_view);
+    # the whole frame's decode must give the same files, and so must a window too small
+    # for the board (a valid pixel on its edge: the whole frame is decoded instead).
+    from virtus.calib import scene
+    from virtus.pipeline import calibrate
+
+    scanner = Scanner(rig=quarter_rig(), render=RenderSettings(spp=1))
+    options = {"board": "4x7", "poses": "random:4", "rng": 9, "processes": 0}
+    window = calibrate_rig(scanner, out_dir=tmp_path / "window", **options)
+    decoded: list[str] = []
+    monkeypatch.setattr(scanner.sequence.__class__, "decode", _recording(decoded))
+    monkeypatch.setattr(calibrate, "board_window", lambda *args: None)
+    calibrate_rig(scanner, out_dir=tmp_path / "whole", **options)
+    assert decoded == ["240x240"] * 4  # the whole frame, each pose
+    decoded.clear()
+    small = partial(scene.board_window, margin_px=-6)  # inside the board's outline
+    monkeypatch.setattr(calibrate, "board_window", small)
+    shrunk = calibrate_rig(scanner, out_dir=tmp_path / "shrunk", **options)
+    assert len(decoded) == 8 and decoded[1::2] == ["240x240"] * 4  # window, then whole
+    assert "240x240" not in decoded[::2]
+    assert _contents(tmp_path / "whole") == _contents(tmp_path / "window")
+    assert _contents(tmp_path / "shrunk") == _contents(tmp_path / "window")
+    assert shrunk.rms_px == window.rms_px
+
+
+def _recording(sizes: list[str]):
+    """``PatternSequence.decode`` that appends each decoded frame size (``WxH``) to
+    ``sizes``."""
+    from virtus.patterns.sequence import PatternSequence
+
+    decode = PatternSequence.decode
+
+    def recorded(self, frames, **options):
+        sizes.append(f"{frames.shape[2]}x{frames.shape[1]}")
+        return decode(self, frames, **options)
+
+    return recorded
 
 
 def test_a_corrupt_pose_file_on_resume_is_one_line_naming_it(rig_file, reference, tmp_path):

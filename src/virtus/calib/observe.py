@@ -4,7 +4,8 @@ points in the camera image and the local camera->projector homographies around t
 :func:`observe_pose` reads a capture (rendered or real) and decodes it;
 :func:`observe_arrays` works on what it reads (decoded projector coordinates, the phase
 background, the white frame), so the calibration job can observe rendered poses in worker
-processes. Both give a :class:`~virtus.calib.solve.PoseObservation` for
+threads or processes (:mod:`virtus.calib.observers`). Both give a
+:class:`~virtus.calib.solve.PoseObservation` for
 :func:`virtus.calib.solve.calibrate_observations`.
 """
 

@@ -15,7 +15,6 @@ one-``cv2.findHomography``-per-circle path as the reference it is tested against
 
 from __future__ import annotations
 
-import warnings
 from typing import Any
 
 import cv2
@@ -136,14 +135,15 @@ def local_homographies(
     boxes = _window_boxes(H, board.object_points[:, :2], radii, uv.shape[:2])
     out = np.full((len(anchors), 3, 3), np.nan)
     area = np.prod((boxes[:, 1] - boxes[:, 0] + 1).clip(min=0), axis=1).clip(min=1)
+    # Batches of windows of similar size (smallest first): less padding to the largest box.
+    order = np.argsort(area, kind="stable")
+    area = area[order]
     start = 0
     while start < len(anchors):  # batches of circles, at least one each
         stop = start + 1
-        while stop < len(anchors) and area[start : stop + 1].max() * (stop + 1 - start) <= (
-            _BATCH_PIXELS
-        ):
+        while stop < len(anchors) and area[stop] * (stop + 1 - start) <= _BATCH_PIXELS:
             stop += 1
-        index = np.arange(start, stop)
+        index = order[start:stop]
         src, dst, valid, inside = _gather_windows(
             uv, H, board.object_points[index, :2], radii[index], boxes[index]
         )
@@ -204,22 +204,23 @@ def _gather_windows(
     and inside (n, P) (inside the window and the image)."""
     size = (boxes[:, 1] - boxes[:, 0] + 1).clip(min=0)
     box_w, box_h = max(int(size[:, 0].max()), 1), max(int(size[:, 1].max()), 1)
-    uu = boxes[:, 0, 0, None, None] + np.arange(box_w)[None, None, :]
-    vv = boxes[:, 0, 1, None, None] + np.arange(box_h)[None, :, None]
-    uu, vv = np.broadcast_arrays(uu, vv)
-    in_box = (uu <= boxes[:, 1, 0, None, None]) & (vv <= boxes[:, 1, 1, None, None])
     n = len(centres)
-    uu, vv, in_box = uu.reshape(n, -1), vv.reshape(n, -1), in_box.reshape(n, -1)
-    pix = np.stack([uu, vv], axis=-1).astype(np.float64)
+    cols = boxes[:, 0, 0, None] + np.arange(box_w)  # (n, W): what depends on the column
+    rows = boxes[:, 0, 1, None] + np.arange(box_h)  # (n, H) or row alone is broadcast
+    in_box = (cols <= boxes[:, 1, 0, None])[:, None, :] & (rows <= boxes[:, 1, 1, None])[:, :, None]
+    x, y = cols[:, None, :].astype(np.float64), rows[:, :, None].astype(np.float64)
+    pix = np.empty((n, box_h, box_w, 2))
+    pix[..., 0], pix[..., 1] = x, y
     # Back to the board plane (camera px -> m) to keep the pixels inside the circle.
     g = np.linalg.inv(H)
-    x, y = pix[..., 0], pix[..., 1]
     den = g[2, 0] * x + g[2, 1] * y + g[2, 2]
-    du = (g[0, 0] * x + g[0, 1] * y + g[0, 2]) / den - centres[:, 0, None]
-    dv = (g[1, 0] * x + g[1, 1] * y + g[1, 2]) / den - centres[:, 1, None]
-    inside = in_box & (du * du + dv * dv <= (radii * radii)[:, None])
+    du = (g[0, 0] * x + g[0, 1] * y + g[0, 2]) / den - centres[:, 0, None, None]
+    dv = (g[1, 0] * x + g[1, 1] * y + g[1, 2]) / den - centres[:, 1, None, None]
+    inside = (in_box & (du * du + dv * dv <= (radii * radii)[:, None, None])).reshape(n, -1)
     height, width = uv.shape[:2]
-    flat = np.minimum(vv, height - 1) * width + np.minimum(uu, width - 1)
+    row_start = np.minimum(rows, height - 1) * width
+    flat = row_start[:, :, None] + np.minimum(cols, width - 1)[:, None, :]
+    pix, flat = pix.reshape(n, -1, 2), flat.reshape(n, -1)
     target = np.take(uv.reshape(-1, 2), flat, axis=0)
     valid = inside & np.isfinite(target).all(axis=-1)
     target[~valid] = 0.0
@@ -259,9 +260,8 @@ def _fit_windows(
         if np.array_equal(within, keep):
             break  # the fit of exactly its own inliers
         residual[~valid] = np.nan
-        with np.errstate(all="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # an all-NaN (degenerate) fit
-            median = np.nanmedian(residual, axis=1)[:, None]
+        median = _row_medians(residual)
+        with np.errstate(invalid="ignore"):
             trimmed = valid & (residual <= np.maximum(limit_n, _TRIM_MEDIANS * median))
         if last == 1 or np.array_equal(trimmed, keep):
             keep = within
@@ -298,14 +298,25 @@ def _trim(
             if not (valid & ~(residual <= limit)).any():
                 return valid  # every pixel within the threshold: nothing to trim
         residual[~valid] = np.nan
-        with np.errstate(all="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # an all-NaN (degenerate) fit
-            median = np.nanmedian(residual, axis=1)[:, None]
+        median = _row_medians(residual)
+        with np.errstate(invalid="ignore"):
             trimmed = valid & (residual <= np.maximum(limit, _TRIM_MEDIANS * median))
         if np.array_equal(trimmed, keep):
             break
         keep = trimmed
     return keep
+
+
+def _row_medians(residual: np.ndarray) -> np.ndarray:
+    """(n, 1) medians of the non-NaN residuals of each row of (n, P), NaN for a row of NaN
+    only (an all-NaN, degenerate fit). Without ``np.nanmedian``'s warning for such rows,
+    whose silencing (``warnings.catch_warnings``) is not thread-safe: windows are fitted
+    in observer threads (:mod:`virtus.calib.observers`)."""
+    median = np.full((len(residual), 1), np.nan)
+    some = ~np.isnan(residual).all(axis=1)
+    if some.any():
+        median[some, 0] = np.nanmedian(residual[some], axis=1)
+    return median
 
 
 def _affine(monomials: np.ndarray, targets: np.ndarray, weights: np.ndarray) -> np.ndarray:

@@ -15,8 +15,18 @@ import numpy as np
 
 from virtus.calib.board import Board, CheckerBoard
 from virtus.calib.poses import BoardPose
+from virtus.geometry.optics import Intrinsics
+from virtus.geometry.transforms import Pose
 
-__all__ = ["BOARD_BLUR_M", "BOARD_TEXEL_M", "CHECKER_BLUR_M", "board_scene", "board_texture"]
+__all__ = [
+    "BOARD_BLUR_M",
+    "BOARD_TEXEL_M",
+    "BOARD_WINDOW_MARGIN_PX",
+    "CHECKER_BLUR_M",
+    "board_scene",
+    "board_texture",
+    "board_window",
+]
 
 #: Gaussian softening (m, board plane) of the printed circles' edges, like slight lens
 #: defocus: with 4 spp the centroid error falls from ~0.005 px to ~0.001 px (measured on
@@ -43,3 +53,37 @@ def board_scene(board: Board, pose: BoardPose, texture: np.ndarray) -> Any:
 
     plane = TexturedPlaneObject(size_m=board.plane_size_m, texture=texture, pose=pose.board2cam)
     return Scene(objects=[plane])
+
+
+#: Camera pixels around the board's outline that :func:`board_window` keeps.
+BOARD_WINDOW_MARGIN_PX = 8
+#: Points per edge of the board plane's outline projected by :func:`board_window` (lens
+#: distortion bends the edges between the corners).
+_OUTLINE_POINTS = 65
+
+
+def board_window(
+    intrinsics: Intrinsics,
+    board: Board,
+    board2cam: Pose,
+    margin_px: int = BOARD_WINDOW_MARGIN_PX,
+) -> tuple[slice, slice] | None:
+    """Rows and columns of the camera image that hold the board plane's image: its outline
+    (densely sampled, lens distortion included) rounded outwards, ``margin_px`` around it,
+    clipped to the image. None when a point of the outline is behind the camera.
+
+    Every pixel a calibration observes lies on the board plane (centroid and homography
+    windows stay on it), so decoding this window decodes every pixel it reads."""
+    half = 0.5 * np.asarray(board.plane_size_m, dtype=np.float64)
+    t = np.linspace(-1.0, 1.0, _OUTLINE_POINTS)
+    edges = [np.stack([t * half[0], np.full_like(t, s * half[1])], axis=1) for s in (-1, 1)]
+    edges += [np.stack([np.full_like(t, s * half[0]), t * half[1]], axis=1) for s in (-1, 1)]
+    outline = np.concatenate(edges)
+    pixels = intrinsics.project(board2cam.apply(np.column_stack([outline, np.zeros(len(outline))])))
+    if not np.isfinite(pixels).all():
+        return None
+    lo = np.maximum(np.floor(pixels.min(axis=0)).astype(int) - margin_px, 0)
+    hi = np.minimum(np.ceil(pixels.max(axis=0)).astype(int) + margin_px + 1, intrinsics.size)
+    if (hi <= lo).any():
+        return None
+    return slice(int(lo[1]), int(hi[1])), slice(int(lo[0]), int(hi[0]))

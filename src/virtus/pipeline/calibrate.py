@@ -59,12 +59,10 @@ from __future__ import annotations
 
 import collections
 import contextlib
-import os
 import re
 import time
 import warnings
-from collections.abc import Callable, Iterator
-from concurrent.futures import Future
+from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -73,7 +71,8 @@ import numpy as np
 
 from virtus.calib import conditioning, points, solve
 from virtus.calib.board import Board, board_from_dict, board_from_spec
-from virtus.calib.observe import check_sequence, observe_arrays, observe_pose
+from virtus.calib.observe import check_sequence, observe_pose
+from virtus.calib.observers import Observers, observe_timed, observer_pool, observers
 from virtus.calib.posefile import load_pose_observation, save_pose_arrays, save_pose_observation
 from virtus.calib.poses import BoardPose, check_pose, check_pose_spread, pose_set
 from virtus.calib.result import RESULT_FILES, CalibrationResult
@@ -82,6 +81,7 @@ from virtus.calib.scene import (
     BOARD_TEXEL_M,
     board_scene,
     board_texture,
+    board_window,
 )
 from virtus.calib.solve import MIN_POSES, PoseObservation, calibrate_observations
 from virtus.calib.truth import truth_error
@@ -124,66 +124,7 @@ LAYOUT = (*RESULT_FILES, EPISODE_FILE, TIMING_FILE, f"{POSE_DIR}/*.npz")
 Progress = Callable[[int, int, str], None]
 
 
-# -- observing poses ------------------------------------------------------------------------
-
-#: Most processes observing poses while the renderer makes the next ones.
-MAX_OBSERVE_PROCESSES = 8
-#: Fewer CPUs than this: observe in the rendering process (worker start-up and moving a
-#: pose's decode between processes would cost more than they save).
-MIN_CPUS_FOR_PROCESSES = 4
-
-
-def observe_processes() -> int:
-    """Worker processes that observe poses (0: observe in this process): one per CPU
-    beyond the renderer's, at most :data:`MAX_OBSERVE_PROCESSES`."""
-    cpus = os.cpu_count() or 1
-    return 0 if cpus < MIN_CPUS_FOR_PROCESSES else min(MAX_OBSERVE_PROCESSES, cpus - 1)
-
-
-def _observer_count(processes: int | None) -> int:
-    """``processes`` checked (an integer in 0..:data:`MAX_OBSERVE_PROCESSES`), or
-    :func:`observe_processes` for None."""
-    if processes is None:
-        return observe_processes()
-    if (
-        isinstance(processes, bool)
-        or not isinstance(processes, int)
-        or not 0 <= processes <= MAX_OBSERVE_PROCESSES
-    ):
-        raise InputError("processes", f"an integer in 0..{MAX_OBSERVE_PROCESSES}", processes)
-    return processes
-
-
-def _observe_timed(*arguments: Any) -> tuple[PoseObservation, float]:
-    """:func:`~virtus.calib.observe.observe_arrays` and the seconds it took (in a worker
-    process or here)."""
-    start = time.perf_counter()
-    return observe_arrays(*arguments), time.perf_counter() - start
-
-
-class _InProcess:
-    """An executor that runs each submitted call at once, here (``submit`` returns a done
-    :class:`~concurrent.futures.Future`)."""
-
-    def submit(self, function: Callable, *arguments: Any) -> Future:
-        future: Future = Future()
-        future.set_result(function(*arguments))
-        return future
-
-
-@contextlib.contextmanager
-def _observer_pool(processes: int) -> Iterator[Any]:
-    """Worker processes for :func:`_observe_timed` (spawned: the renderer's threads and
-    device context are not forked), or this process when ``processes`` is 0."""
-    if processes == 0:
-        yield _InProcess()
-        return
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(processes, mp_context=context) as pool:
-        yield pool
+# -- capture seeds (poses are observed by :mod:`virtus.calib.observers`) -------------------
 
 
 def pose_seed(seed: int, index: int) -> int:
@@ -336,7 +277,8 @@ def calibrate_rig(
         pose outside); ``False`` captures them anyway (poses whose board is not fully seen
         are then dropped with a warning).
     processes : worker processes that observe poses while the next render (0: in this
-        process; default :func:`observe_processes`); the result does not depend on it.
+        thread; default None: threads of this process,
+        :func:`~virtus.calib.observers.observers`); the result does not depend on it.
     distortion : the lens model of both devices (``"k1k2p1p2"``: k3 fixed at 0; ``"k3"``;
         ``"rational"``: :data:`virtus.calib.solve.DISTORTION_MODELS`).
 
@@ -356,7 +298,7 @@ def calibrate_rig(
         raise InputError("scanner", "a virtus.scanner.Scanner", type(scanner).__name__)
     if out_dir is None and (resume or overwrite):
         raise InputError("out_dir", "a directory for resume/overwrite", None)
-    processes = _observer_count(processes)
+    chosen = observers(processes)
     check_sequence(scanner.sequence)
     if isinstance(poses, str):
         poses = check_pose_spec(poses)  # "Random:6 " and "random:6" are one configuration
@@ -367,7 +309,7 @@ def calibrate_rig(
     episode = _episode(scanner, board, pose_list, poses, seed, bool(fix_intrinsics))
     episode["settings"].update(solve.distortion_setting(distortion))
     if out_dir is None:
-        return _run_episode(scanner, board, pose_list, episode, progress, None, processes)
+        return _run_episode(scanner, board, pose_list, episode, progress, None, chosen)
     config = {
         "scanner": episode["scanner"],
         "board": episode["board"],
@@ -380,7 +322,7 @@ def calibrate_rig(
     with claim_run(
         out_dir, COMMAND, config, layout=LAYOUT, overwrite=overwrite, resume=resume
     ) as run:
-        return _run_episode(scanner, board, pose_list, episode, progress, run, processes)
+        return _run_episode(scanner, board, pose_list, episode, progress, run, chosen)
 
 
 def _run_episode(
@@ -390,7 +332,7 @@ def _run_episode(
     episode: dict[str, Any],
     progress: Progress | None,
     run: RunDirectory | None,
-    processes: int | None = None,
+    chosen: Observers,
 ) -> CalibrationResult:
     # One read-only float64 image for every pose: the scenes share it, and the renderer
     # its texture.
@@ -406,8 +348,8 @@ def _run_episode(
     observations: list[PoseObservation] = []
     # Poses are rendered and decoded here, one after the other (the renderer uses the whole
     # device), and observed (detection, centroids, local homographies: CPU work) in worker
-    # processes while the next poses render. Results are taken in pose order, so files,
-    # log and result are those of a sequential run.
+    # threads (or processes) while the next poses render. Results are taken in pose order,
+    # so files, log and result are those of a sequential run.
     pending: collections.deque = collections.deque()
 
     def finish_oldest() -> None:
@@ -424,8 +366,7 @@ def _run_episode(
         if progress is not None:
             progress(index + 1, len(pose_list), pose.name)
 
-    workers = _observer_count(processes)
-    with _observer_pool(workers) as pool:
+    with observer_pool(chosen) as pool:
         for index, pose in enumerate(pose_list):
             seed = episode["pose_seeds"][index]
             name = f"{POSE_DIR}/{pose.name}.npz"
@@ -438,11 +379,10 @@ def _run_episode(
                     progress(index + 1, len(pose_list), pose.name)
                 continue
             start = time.perf_counter()
-            view = scanner.decoded_view(board_scene(board, pose, texture), rng=seed)
+            arguments = (*_rendered_view(scanner, board, pose, texture, seed), board)
             timing["render_s"] += time.perf_counter() - start
-            arguments = (view.decoded.proj_uv, view.decoded.background, view.white, board)
-            pending.append((index, pose, seed, pool.submit(_observe_timed, *arguments, pose.name)))
-            while len(pending) > max(workers, 0):  # bounds the poses held in memory
+            pending.append((index, pose, seed, pool.submit(observe_timed, *arguments, pose.name)))
+            while len(pending) > chosen.in_flight:  # bounds the poses held in memory
                 finish_oldest()
         while pending:
             finish_oldest()
@@ -451,6 +391,46 @@ def _run_episode(
         result.save(run.path)
         run.write_json(TIMING_FILE, _timing_record(timing))
     return result
+
+
+def _rendered_view(
+    scanner: Scanner, board: Board, pose: BoardPose, texture: np.ndarray, seed: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Decoded projector coordinates (H, W, 2), background (H, W) and white frame (or None)
+    of one pose rendered with ``scanner`` (:meth:`~virtus.scanner.Scanner.decoded_view`).
+
+    On the host, with a white frame to detect the board in and a decode that is per pixel
+    (no neighbour check), only the board's window (:func:`~virtus.calib.scene.board_window`,
+    about a quarter of the paper's frames) is decoded: its values are those of the whole
+    frame's decode, the rest is NaN (coordinates) and 0 (background), and observation
+    reads only pixels on the board plane. Should a valid pixel lie on the window's edge
+    (the board's image reaching beyond it), the whole frame is decoded instead."""
+    scene = board_scene(board, pose, texture)
+    sequence = scanner.sequence
+    kinds = [frame.kind for frame in sequence.frames]
+    window = board_window(scanner.rig.camera.intrinsics, board, pose.board2cam)
+    per_pixel = not any(sequence.runs_neighbour_check(d, None, False) for d in sequence.directions)
+    if scanner.renders_on_gpu or "white" not in kinds or window is None or not per_pixel:
+        view = scanner.decoded_view(scene, rng=seed)
+        return view.decoded.proj_uv, view.decoded.background, view.white
+    capture = scanner.capture(scene, rng=seed, command=[])
+    white = capture.frames[kinds.index("white")]
+    part = sequence.decode(capture.frames[:, window[0], window[1]], full_scale=capture.full_scale)
+    valid = np.isfinite(part.proj_uv).any(axis=-1)
+    height, width = white.shape
+    edges = [
+        valid[0] if window[0].start > 0 else None,
+        valid[-1] if window[0].stop < height else None,
+        valid[:, 0] if window[1].start > 0 else None,
+        valid[:, -1] if window[1].stop < width else None,
+    ]
+    if any(edge is not None and edge.any() for edge in edges):
+        decoded = capture.decode()
+        return decoded.proj_uv, decoded.background, white
+    proj_uv = np.full((height, width, 2), np.nan)
+    background = np.zeros((height, width))
+    proj_uv[window], background[window] = part.proj_uv, part.background
+    return proj_uv, background, white
 
 
 def _timing_record(timing: dict[str, float]) -> dict[str, Any]:
@@ -576,8 +556,8 @@ def calibrate_captures(
     distortion : the lens model (as :func:`calibrate_rig`).
     progress : called after each pose as ``progress(done, total, name)``.
     processes : worker processes that read, decode and observe the poses side by side
-        (default :func:`observe_processes`; 0: one after the other, here). The files and the
-        result do not depend on it.
+        (default None: threads of this process; 0: one after the other, here). The files and
+        the result do not depend on it.
 
     Returns
     -------
@@ -592,7 +572,7 @@ def calibrate_captures(
         set, ``out_dir`` in use by another run.
     """
     board = board_from_spec(board)
-    workers = _observer_count(processes)
+    chosen = observers(processes)
     loaded: list[Capture] = []
     names: list[str] = []
     paths: list[Path | None] = []
@@ -621,7 +601,7 @@ def calibrate_captures(
         **solve.distortion_setting(distortion),
     }
     if out_dir is None:
-        return _run_captures(loaded, names, board, episode, progress, None, workers)
+        return _run_captures(loaded, names, board, episode, progress, None, chosen)
     inputs = {
         f"capture {name}": Path(path) / "capture.json"
         for name, path in zip(names, paths, strict=True)
@@ -635,7 +615,7 @@ def calibrate_captures(
         layout=CAPTURES_LAYOUT,
         overwrite=overwrite,
     ) as run:
-        return _run_captures(loaded, names, board, episode, progress, run, workers)
+        return _run_captures(loaded, names, board, episode, progress, run, chosen)
 
 
 def _record_observed(run: RunDirectory | None, name: str, obs: PoseObservation) -> None:
@@ -665,17 +645,17 @@ def _run_captures(
     episode: dict[str, Any],
     progress: Progress | None,
     run: RunDirectory | None,
-    workers: int,
+    chosen: Observers,
 ) -> CalibrationResult:
     timing = {"render_s": 0.0, "observe_s": 0.0, "calibrate_s": 0.0}
     if run is not None:
         run.own(EPISODE_FILE, *(f"{POSE_DIR}/{n}.npz" for n in names), *RESULT_FILES, TIMING_FILE)
         run.write_json(EPISODE_FILE, episode)
     observations = []
-    with _observer_pool(workers) as pool:
+    with observer_pool(chosen) as pool:
         # Poses are observed side by side, at most two per worker in flight (each holds its
         # frames), and taken in pose order: the files and log are a sequential run's.
-        in_flight = max(1, 2 * workers)
+        in_flight = max(1, 2 * chosen.count)
         jobs: collections.deque = collections.deque()
         for index, name in enumerate(names):
             while len(jobs) < in_flight and index + len(jobs) < len(names):
