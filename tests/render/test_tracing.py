@@ -135,3 +135,12 @@ def test_coherent_camera_rays_find_the_same_hits(monkeypatch, tmp_path) -> None:
     expected = plain.gt.arrays()
     for name, array in coherent.gt.arrays().items():
         np.testing.assert_array_equal(array, expected[name], name)
+
+
+def test_camera_rays_carry_the_coherent_hint_on_llvm_only() -> None:
+    # Embree (LLVM) traverses coherent rays in packets; Mitsuba's CUDA path drops the hint,
+    # so CUDA takes the plain call (the same OptiX kernel, and the code says what runs).
+    from virtus.render.tracing import coherent_camera_rays
+
+    assert coherent_camera_rays("llvm_ad_rgb") and coherent_camera_rays("llvm_ad_mono")
+    assert not coherent_camera_rays("cuda_ad_rgb")

@@ -6,7 +6,8 @@ Same definition (:data:`virtus.sensor.camera.NOISE_STREAM`): per frame a 64-bit 
 runs
 unchanged on ``UInt32`` arrays) of ``(pixel, k0, k1, 0)``, Box-Muller. Keys are computed on
 the host (a few Python integers per frame) and gathered by frame inside the synthesis
-kernel's frame loop, so one kernel draws the noise of every frame of a pose.
+kernel (in its frame loop, or per lane of a lane per frame and pixel), so one kernel draws
+the noise of every frame of a pose.
 """
 
 from __future__ import annotations

@@ -1,25 +1,43 @@
 """Frame synthesis and digitisation on the device: the model of
 :mod:`virtus.render.synthesis` and :class:`virtus.sensor.camera.Sensor` on Dr.Jit arrays.
 
-One kernel makes a whole pose's frames: lane ``p`` is one camera pixel. It reads its S taps
-(weight, projector coordinates) once and turns each coordinate into its table positions (the
-nearest entry, or the bilinear pair and fraction) along u, for the frames whose fringes vary
-along the projector's columns, and along v, for the others. Then it loops over the frames (a
-symbolic loop: the kernel's source does not depend on the sequence, whose frame count, kinds
-and rows are data): frame ``f`` looks every tap up in its row of one table holding every
-frame's emitted profile (uniform frames: one entry), sums them, adds the ambient light,
-digitises with the sensor --
-its noise drawn from the same counter-based streams as on the host
-(:mod:`virtus.render.jit.noise`) -- and writes pixel ``p`` of frame ``f`` into one device
-array (:class:`~virtus.render.jit.tracing.DeviceFrames`, frame-major), noting saturation as
-it goes. Tap data are read once per pixel, not once per frame and pixel; the output is
-written once, with no second pass for the saturation mask.
-Frames are split into several kernels only when a pose has more than :data:`_MAX_LANES`
-pixels x frames.
+One kernel makes a whole pose's frames. Frame ``f`` of pixel ``p`` looks each of the pixel's
+S taps (weight, projector coordinates) up in frame ``f``'s row of one table holding every
+frame's emitted profile (uniform frames: one entry) -- along u for the frames whose fringes
+vary along the projector's columns, along v for the others --, sums them, adds the ambient
+light and digitises with the sensor, its noise drawn from the same counter-based streams as
+on the host (:mod:`virtus.render.jit.noise`). The digital frames are written into one
+device array (:class:`~virtus.render.jit.tracing.DeviceFrames`, frame-major) and the
+saturation mask in the same launch. Frames are split into several kernels only when a pose
+has more than :data:`_MAX_LANES` pixels x frames.
+
+Two kernel layouts compute these same bits (:func:`layout_for` picks one by backend):
+
+* :data:`LAYOUT_PIXEL` (LLVM, the CPU): a lane per camera pixel. It reads its taps once,
+  turns each coordinate into its table positions (nearest entry, or bilinear pair and
+  fraction) once, then loops over the frames -- a symbolic loop, so the kernel's source does
+  not depend on the sequence. A CPU has a few SIMD lanes per core, and re-reading the taps
+  per frame was the cost: on 2 CPU cores (``llvm_ad_rgb``) this layout took 2.3-2.4x less
+  synthesis + sensor time and 1.55x less CPU time per pose than 677de4a's lane per (frame,
+  pixel); against :data:`LAYOUT_FRAME_PIXEL` (960 px crop, 4 spp, nearest, ``imx174``) 193 ms
+  against 320 ms of CPU time for a pose's synthesis + sensor (1.64-1.68x, 3 alternated rounds).
+* :data:`LAYOUT_FRAME_PIXEL` (CUDA, the GPU): a lane per (frame, pixel), ``F`` (52 for the
+  default sequence) times as many lanes, each reading its taps -- 677de4a's kernel, its
+  saturation mask now a masked scatter of ``True`` by every saturated lane in the same
+  launch (every writer of a pixel writes the same value). A GPU wants those lanes: on an
+  NVIDIA H200 (``cuda_ad_rgb``, ``benchmarks/bench_profile.py --variant cuda_ad_rgb --repeats
+  20 --poses 4 --mitsuba 16 --no-host --agreement --rounds 3``, 677de4a alternated with the
+  per-pixel loop in one run) the loop took 2.7-4.6 ms for synthesis + sensor against
+  2.6 ms, and the pose's device render 5.7-7.9 ms against 5.7-6.0 ms (6,581-9,074 against
+  8,667-9,140 frames/s).
+
+Both layouts do the same float32 operations in the same order per value, so their frames and
+masks are bit-identical (tests/render/jit/test_synthesis.py checks it on LLVM).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -32,12 +50,23 @@ from virtus.render.tracing import Trace
 from virtus.sensor.camera import Sensor
 from virtus.sensor.projector import Lookup, ProjectorModel
 
-#: Most pixels x frames per kernel: bounds the work of one kernel launch.
+#: Most pixels x frames per kernel: bounds the work of one kernel launch (and the lanes of
+#: a :data:`LAYOUT_FRAME_PIXEL` kernel).
 _MAX_LANES = 1 << 28
 #: Frame kinds: fringes along u (the projector's columns), along v (its rows), uniform.
 _AXIS_U, _AXIS_V, _AXIS_NONE = 0, 1, 2
 #: Bits of a frame's code that hold its kind; the rest is its row's start in the table.
 _KIND_BITS = 2
+#: Kernel layouts (see the module docstring): a lane per pixel looping over the frames, or
+#: a lane per (frame, pixel).
+LAYOUT_PIXEL, LAYOUT_FRAME_PIXEL = "pixel", "frame_pixel"
+LAYOUTS = (LAYOUT_PIXEL, LAYOUT_FRAME_PIXEL)
+
+
+def layout_for(variant: str) -> str:
+    """The kernel layout for a Mitsuba variant: :data:`LAYOUT_PIXEL` on LLVM (CPU),
+    :data:`LAYOUT_FRAME_PIXEL` on CUDA (GPU)."""
+    return LAYOUT_PIXEL if variant.startswith("llvm") else LAYOUT_FRAME_PIXEL
 
 
 def _profile_table(
@@ -71,20 +100,79 @@ def _profile_table(
     return table, start << _KIND_BITS | kind, lengths
 
 
-def _tap_positions(
-    trace: DeviceTrace, weight: Any, projector: ProjectorModel, lengths: dict[int, int]
-) -> list[tuple[Any, dict[int, tuple[Any, Any, Any]]]]:
-    """Per tap column of every pixel (lane ``p``): its weight and, per frame kind in
-    ``lengths`` (its table rows' length), its table position ``(left, right, fraction)``:
-    the nearest entry has fraction None; a uniform frame reads entry 0. Frame-independent,
-    so computed once per pixel before the frame loop, with a per-frame lookup's arithmetic."""
-    mi, dr = trace.modules()
+@dataclass
+class _Pose:
+    """What both layouts read: the pose's taps and the sequence's table on the device, the
+    sensor's streams, and the output (``out``, frame-major, and ``saturated``, per pixel)."""
+
+    mi: Any
+    dr: Any
+    trace: DeviceTrace
+    projector: ProjectorModel
+    sensor: Sensor
+    n_frames: int
+    weight: Any  # Float (P * S,) tap weights
+    table: Any  # Float: every frame's row (_profile_table)
+    code: Any  # UInt32 (F,): start << _KIND_BITS | kind per frame
+    lengths: dict[int, int]  # row length per frame kind present
+    keys: tuple[Any, Any] | None  # the frames' noise stream keys (a noisy sensor)
+    prnu: Any  # Float (P,) or None
+    dsnu: Any  # Float (P,) or None
+    gain: Any  # opaque Float: the exposure
+    out: Any
+    saturated: Any
+
+    @property
+    def integer(self) -> Any:
+        """The digital frames' Dr.Jit type."""
+        return self.mi.UInt8 if self.sensor.bit_depth == 8 else self.mi.UInt32
+
+    def lasts(self) -> dict[int, Any]:
+        """The last entry of each kind's rows: a projector's value, opaque so that no kernel
+        bakes it in."""
+        return {k: self.dr.opaque(self.mi.Float, float(n - 1)) for k, n in self.lengths.items()}
+
+    def digitize(self, radiance: Any, frame: Any, pixel: Any, lanes_per_pixel: bool) -> Any:
+        """The digital values (``integer``) of ``radiance`` (Float, before the ambient light)
+        at lanes of frame ``frame`` and pixel ``pixel``; ``lanes_per_pixel``: lane ``p`` is
+        pixel ``p`` (per-pixel arrays are read as they are, else gathered)."""
+        mi, dr, trace = self.mi, self.dr, self.trace
+
+        def at_pixel(values: Any) -> Any:
+            if values is None or lanes_per_pixel:
+                return values
+            return dr.gather(mi.Float, values, pixel)
+
+        if trace.ambient is not None:
+            radiance += at_pixel(trace.ambient)
+        noise = None
+        if self.keys is not None:
+            k0, k1 = (dr.gather(mi.UInt32, key, frame) for key in self.keys)
+            normal = standard_normal_jit(mi, dr, k0, k1, pixel)
+            noise = (normal, at_pixel(self.prnu), at_pixel(self.dsnu))
+        # The exposure (a pose's auto exposure) enters as an opaque variable, so the kernel
+        # compiled for one pose serves the next: radiance * exposure is the same float32
+        # product, and digitize_jit's own factor 1.0 leaves it unchanged.
+        return self.integer(self.sensor.digitize_jit(radiance * self.gain, 1.0, dr, noise))
+
+    def is_saturated(self, digital: Any) -> Any:
+        """Bool per lane: ``digital`` at or above the sensor's saturation level."""
+        return self.mi.UInt32(digital) >= self.mi.UInt32(self.sensor.saturation_dn)
+
+
+# --- LAYOUT_PIXEL: a lane per pixel, a symbolic loop over the frames ----------------------
+
+
+def _tap_positions(pose: _Pose) -> list[tuple[Any, dict[int, tuple[Any, Any, Any]]]]:
+    """Per tap column of every pixel (lane ``p``): its weight and, per frame kind present,
+    its table position ``(left, right, fraction)``: the nearest entry has fraction None; a
+    uniform frame reads entry 0. Frame-independent, so computed once per pixel before the
+    frame loop, with a per-frame lookup's arithmetic."""
+    mi, dr, trace, projector = pose.mi, pose.dr, pose.trace, pose.projector
     taps = trace.taps_per_pixel
-    scale = projector.supersampling
     read = Lookup.bilinear if projector.pixel == Lookup.psf else projector.pixel
     pixel = dr.arange(mi.UInt32, trace.n_pixels)
-    # The last entry of a row: a projector's value, opaque so that no kernel bakes it in.
-    lasts = {code: dr.opaque(mi.Float, float(lengths[code] - 1)) for code in lengths}
+    lasts = pose.lasts()
     zero = dr.zeros(mi.UInt32, trace.n_pixels)
     uniform = (zero, zero, None if read == Lookup.nearest else dr.zeros(mi.Float, trace.n_pixels))
     out = []
@@ -92,11 +180,11 @@ def _tap_positions(
         tap = pixel * taps + column
         positions: dict[int, tuple[Any, Any, Any]] = {_AXIS_NONE: uniform}
         for code, coordinates in ((_AXIS_U, trace.u_p), (_AXIS_V, trace.v_p)):
-            if code not in lengths:
+            if code not in lasts:
                 continue
             last = lasts[code]
             c = dr.gather(mi.Float, coordinates, tap)
-            if scale > 1:
+            if projector.supersampling > 1:
                 c = projector.table_coordinate(c)
             if read == Lookup.nearest:
                 index = mi.UInt32(dr.clip(dr.floor(c + 0.5), 0.0, last))
@@ -106,7 +194,7 @@ def _tap_positions(
                 left = dr.minimum(dr.floor(x), dr.maximum(last - 1.0, 0.0))
                 right = dr.minimum(left + 1.0, last)
                 positions[code] = (mi.UInt32(left), mi.UInt32(right), x - left)
-        out.append((dr.gather(mi.Float, weight, tap), positions))
+        out.append((dr.gather(mi.Float, pose.weight, tap), positions))
     return out
 
 
@@ -131,6 +219,84 @@ def _frame_radiance(mi: Any, dr: Any, table: Any, taps: list, code: Any) -> Any:
     return radiance
 
 
+def _pixel_kernel(pose: _Pose, first: int, count: int) -> None:
+    """Frames ``first .. first + count - 1`` into ``pose.out`` and ``pose.saturated``: one
+    kernel of a lane per pixel looping over the frames."""
+    mi, dr, n_pixels = pose.mi, pose.dr, pose.trace.n_pixels
+    taps = _tap_positions(pose)
+    pixel = dr.arange(mi.UInt32, n_pixels)
+
+    def body(frame: Any, saturated: Any) -> tuple[Any, Any]:
+        code = dr.gather(mi.UInt32, pose.code, frame)
+        radiance = _frame_radiance(mi, dr, pose.table, taps, code)
+        digital = pose.digitize(radiance, frame, pixel, lanes_per_pixel=True)
+        dr.scatter(pose.out, digital, frame * n_pixels + pixel)
+        return frame + 1, saturated | pose.is_saturated(digital)
+
+    end = dr.opaque(mi.UInt32, first + count)
+    frame = dr.zeros(mi.UInt32, n_pixels) + dr.opaque(mi.UInt32, first)
+    _, pose.saturated = dr.while_loop(
+        (frame, pose.saturated), lambda frame, _: frame < end, body, label="frames"
+    )
+    dr.eval(pose.out, pose.saturated)
+
+
+# --- LAYOUT_FRAME_PIXEL: a lane per (frame, pixel) ----------------------------------------
+
+
+def _lane_radiance(pose: _Pose, frame: Any, pixel: Any) -> Any:
+    """Float per lane: the sum over pixel ``pixel``'s taps of weight x frame ``frame``'s
+    emitted light, each lane reading only its frame's coordinate (masked gathers)."""
+    mi, dr, trace, projector = pose.mi, pose.dr, pose.trace, pose.projector
+    taps = trace.taps_per_pixel
+    read = Lookup.bilinear if projector.pixel == Lookup.psf else projector.pixel
+    code = dr.gather(mi.UInt32, pose.code, frame)
+    start, kind = code >> _KIND_BITS, code & ((1 << _KIND_BITS) - 1)
+    on_u, on_v = kind == _AXIS_U, kind == _AXIS_V
+    lasts = pose.lasts()
+    last = dr.select(on_v, lasts.get(_AXIS_V, 0.0), 0.0)
+    last = dr.select(on_u, lasts.get(_AXIS_U, 0.0), last)
+    radiance = dr.zeros(mi.Float, dr.width(frame))
+    for column in range(taps):
+        tap = pixel * taps + column
+        c = dr.zeros(mi.Float, dr.width(frame))
+        for axis, coordinates, active in ((_AXIS_U, trace.u_p, on_u), (_AXIS_V, trace.v_p, on_v)):
+            if axis in lasts:
+                c += dr.gather(mi.Float, coordinates, tap, active)
+        if projector.supersampling > 1:
+            c = projector.table_coordinate(c)
+        if read == Lookup.nearest:
+            index = mi.UInt32(dr.clip(dr.floor(c + 0.5), 0.0, last))
+            value = dr.gather(mi.Float, pose.table, start + index)
+        else:
+            x = dr.clip(c, 0.0, last)
+            left = dr.minimum(dr.floor(x), dr.maximum(last - 1.0, 0.0))
+            right = dr.minimum(left + 1.0, last)
+            fraction = x - left
+            value = dr.gather(mi.Float, pose.table, start + mi.UInt32(left)) * (1.0 - fraction)
+            value += dr.gather(mi.Float, pose.table, start + mi.UInt32(right)) * fraction
+        radiance += dr.gather(mi.Float, pose.weight, tap) * value
+    return radiance
+
+
+def _frame_pixel_kernel(pose: _Pose, first: int, count: int) -> None:
+    """Frames ``first .. first + count - 1`` into ``pose.out`` and ``pose.saturated``: one
+    kernel of a lane per (frame, pixel); lane ``i`` is pixel ``i mod P`` of frame
+    ``first + i div P``."""
+    mi, dr, n_pixels = pose.mi, pose.dr, pose.trace.n_pixels
+    lane = dr.arange(mi.UInt32, count * n_pixels) + dr.opaque(mi.UInt32, first * n_pixels)
+    frame = lane // n_pixels
+    pixel = lane - frame * n_pixels
+    digital = pose.digitize(_lane_radiance(pose, frame, pixel), frame, pixel, False)
+    if count == pose.n_frames:  # one kernel makes the whole stack: no scatter
+        pose.out = digital
+    else:
+        dr.scatter(pose.out, digital, lane)
+    # Every saturated lane writes True to its pixel: writers of a pixel agree.
+    dr.scatter(pose.saturated, mi.Bool(True), pixel, pose.is_saturated(digital))
+    dr.eval(pose.out, pose.saturated)
+
+
 def synthesize_on_device(
     trace: DeviceTrace,
     sequence: Any,
@@ -139,6 +305,7 @@ def synthesize_on_device(
     exposure: float,
     seed: int = 0,
     projector_intrinsics: Any | None = None,
+    layout: str | None = None,
 ) -> DeviceFrames:
     """Digital frames of ``sequence`` from a device trace, made and kept on its device.
 
@@ -151,6 +318,8 @@ def synthesize_on_device(
     exposure : digital numbers per unit radiance.
     seed : seed of the noise streams.
     projector_intrinsics : the projector's intrinsics (needed with a fall-off).
+    layout : the kernel layout, one of :data:`LAYOUTS` (default: :func:`layout_for` the
+        trace's variant); the same frames either way.
 
     Returns
     -------
@@ -158,52 +327,35 @@ def synthesize_on_device(
     followed by ``sensor.digitize`` (float32 sums in another order, and the noise's
     ``log``/``cos`` rounding, can move a value sitting on a rounding edge by 1 DN).
     """
+    layout = layout_for(trace.variant) if layout is None else layout
+    if layout not in LAYOUTS:
+        raise InputError("layout", f"one of {', '.join(LAYOUTS)}", layout)
     projector = as_projector(projector)
     mi, dr = trace.modules()
     n_frames, n_pixels = len(sequence.frames), trace.n_pixels
     if n_frames * n_pixels >= 1 << 32:  # the frames' UInt32 indices; before any allocation
         raise InputError("sequence", f"fewer than {(1 << 32) // n_pixels} frames", n_frames)
     table, code, lengths = _profile_table(trace, sequence, projector)
-    table_dr, code_dr = mi.Float(table), mi.UInt32(code)
     weight = tap_weights(trace, projector, projector_intrinsics)
     dr.eval(weight)
-    keys = frame_keys(mi, seed, np.arange(n_frames)) if sensor.noisy else None
-    prnu, dsnu = pixel_patterns(trace.variant, sensor, n_pixels) if sensor.noisy else (None,) * 2
-    integer = mi.UInt8 if sensor.bit_depth == 8 else mi.UInt32
-    out = dr.empty(integer, n_frames * n_pixels)
-    pixel = dr.arange(mi.UInt32, n_pixels)
-    saturated = dr.full(mi.Bool, False, n_pixels)
-    level = mi.UInt32(sensor.saturation_dn)
-    # The exposure (a pose's auto exposure) enters as an opaque variable, so the kernel
-    # compiled for one pose serves the next: radiance * exposure is the same float32
-    # product, and digitize_jit's own factor 1.0 leaves it unchanged.
-    gain = dr.opaque(mi.Float, float(exposure))
+    noisy = sensor.noisy
+    prnu, dsnu = pixel_patterns(trace.variant, sensor, n_pixels) if noisy else (None, None)
+    pose = _Pose(
+        mi=mi, dr=dr, trace=trace, projector=projector, sensor=sensor, n_frames=n_frames,
+        weight=weight, table=mi.Float(table), code=mi.UInt32(code), lengths=lengths,
+        keys=frame_keys(mi, seed, np.arange(n_frames)) if noisy else None,
+        prnu=prnu, dsnu=dsnu, gain=dr.opaque(mi.Float, float(exposure)), out=None,
+        saturated=dr.full(mi.Bool, False, n_pixels),
+    )  # fmt: skip
+    kernel = _pixel_kernel if layout == LAYOUT_PIXEL else _frame_pixel_kernel
     frames_per_kernel = max(1, min(n_frames, _MAX_LANES // n_pixels))
+    if layout == LAYOUT_PIXEL or frames_per_kernel < n_frames:  # else the kernel's own result
+        pose.out = dr.empty(pose.integer, n_frames * n_pixels)
     for first in range(0, n_frames, frames_per_kernel):
-        taps = _tap_positions(trace, weight, projector, lengths)  # in this kernel, per pixel
-
-        def body(frame: Any, saturated: Any, taps: list = taps) -> tuple[Any, Any]:
-            frame_code = dr.gather(mi.UInt32, code_dr, frame)
-            radiance = _frame_radiance(mi, dr, table_dr, taps, frame_code)
-            if trace.ambient is not None:
-                radiance += trace.ambient
-            noise = None
-            if keys is not None:
-                k0, k1 = (dr.gather(mi.UInt32, key, frame) for key in keys)
-                noise = (standard_normal_jit(mi, dr, k0, k1, pixel), prnu, dsnu)
-            digital = integer(sensor.digitize_jit(radiance * gain, 1.0, dr, noise))
-            dr.scatter(out, digital, frame * n_pixels + pixel)
-            return frame + 1, saturated | (mi.UInt32(digital) >= level)
-
-        end = dr.opaque(mi.UInt32, min(first + frames_per_kernel, n_frames))
-        frame = dr.zeros(mi.UInt32, n_pixels) + dr.opaque(mi.UInt32, first)
-        _, saturated = dr.while_loop(
-            (frame, saturated), lambda frame, _, end=end: frame < end, body, label="frames"
-        )
-        dr.eval(out, saturated)
+        kernel(pose, first, min(frames_per_kernel, n_frames - first))
     return DeviceFrames(
-        data=out, n_frames=n_frames, height=trace.height, width=trace.width,
-        dtype=sensor.dtype, saturated=saturated, variant=trace.variant,
+        data=pose.out, n_frames=n_frames, height=trace.height, width=trace.width,
+        dtype=sensor.dtype, saturated=pose.saturated, variant=trace.variant,
     )  # fmt: skip
 
 
@@ -215,10 +367,11 @@ def synthesize_digital(
     exposure: float,
     seed: int = 0,
     projector_intrinsics: Any | None = None,
+    layout: str | None = None,
 ) -> np.ndarray:
     """(F, H, W) digital frames of a host :class:`Trace` synthesised on its device
     (:func:`synthesize_on_device` after one upload, one transfer back)."""
     device = DeviceTrace.from_trace(trace)
     return synthesize_on_device(
-        device, sequence, projector, sensor, exposure, seed, projector_intrinsics
+        device, sequence, projector, sensor, exposure, seed, projector_intrinsics, layout
     ).numpy()
