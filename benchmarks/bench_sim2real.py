@@ -43,6 +43,24 @@ same command after a kill.
 
 The real capture is a flat board (white circles on black): "depth MAE" there is against the
 capture's own multi-step depth over its valid pixels, not against a ground truth.
+
+A second, **licensed** real bench is committed (``tests/fixtures/real/slmaster_eye``, its
+README): github.com/Practice3DVision/SLMaster (commit 592a368, MIT at that commit),
+``data/monocularCamera``: a plaster relief of an eye at 0.69-0.78 m, a DLP4710 106 mm to the
+camera's right (so **vertical** fringes, ``direction: v``), 12 phase steps of a 60 px
+period + 5 Gray bits + the complementary frame, the lab's OpenCV calibration; the fixture
+keeps the 18 frames cropped to the relief and binned 2 x 2 (256 x 256 px, 0.56 MB) with the
+calibration adjusted for the crop. ``fixture SLMASTER_GIT_DIR`` derives it (once; the same
+bytes each time), ``prepare-fixture`` turns it into what ``run`` reads (no light fit: the
+capture has no white or black frame, so ``realistic`` uses the imx174 + lightcrafter
+presets), and ``run`` then uses the fixture's sequence, vertical fringes and scenes at its
+standoff (:data:`BENCHES`)::
+
+    PYTHONPATH=src python benchmarks/bench_sim2real.py prepare-fixture --out .gpu-work/real-slm
+    PYTHONPATH=src python benchmarks/bench_sim2real.py run .gpu-work/real-slm \\
+        --out .gpu-work/s2r-slm --num 640 --steps 1500 --base-channels 32 --batch-size 8 \\
+        --workers 12 --loader-workers 8 --json sim2real-slmaster.json
+
 Not a test: numbers depend on the machine (quote them with it and the sizes).
 """
 
@@ -70,6 +88,43 @@ REAL_FRAMES = (*range(25), 51)
 FULL_SIZE = (1936, 1464)
 #: Variants: (sensor, projector) choices, resolved by :func:`_devices`.
 VARIANTS = ("realistic", "ideal", "ideal-exposed")
+#: The real benches ``run`` knows, by the ``bench`` that ``prepare``/``prepare-fixture``
+#: record in ``SOURCE.json`` (none recorded: the LightCrafter lab): the fringe direction
+#: that carries depth, the depth-loss unit, what the reference is, and what ``run`` changes
+#: in :data:`TEMPLATE` (``None``: resolved by :func:`_bench_dataset`).
+BENCHES = {
+    "lightcrafter-lab": {
+        "direction": "h",
+        "depth_range_m": 0.05,  # depth L1 in units of 5 cm (the scenes' depth span)
+        "reference": "its 18-step + Gray-code phase",
+        "dataset": {},
+    },
+    "slmaster-eye": {
+        "direction": "v",  # the projector is 106 mm beside the camera
+        "depth_range_m": 0.1,  # the relief spans 0.69-0.78 m
+        "reference": "its 12-step + complementary Gray-code phase",
+        # SLMaster's sequence, scenes at the relief's standoff: one or two objects at
+        # 0.66-0.76 m before a tilted plane at 0.74-0.86 m; bright matte (plaster).
+        "dataset": {
+            "fringes": None,
+            "objects": {
+                "count": [1, 2],
+                "distance_m": [0.66, 0.76],
+                "field": 0.6,
+                "sources": [
+                    {"type": "freeform", "size_m": [0.06, 0.18], "instances": 40,
+                     "subdivisions": 4, "weight": 2},
+                    {"type": "box", "size_m": [0.04, 0.14], "instances": 20},
+                    {"type": "sphere", "radius_m": [0.02, 0.07], "instances": 20},
+                ],
+            },
+            "materials": {"albedo": [0.5, 0.95], "roughness": [0.95, 0.95],
+                          "specular": [0.15, 0.15]},
+            "planes": {"count": [1, 1], "distance_m": [0.74, 0.86], "tilt_deg": 25,
+                       "size_m": 1.5},
+        },
+    },
+}  # fmt: skip
 
 
 # -- prepare (runs here, on the real capture) ------------------------------------------------
@@ -203,6 +258,171 @@ def prepare(source: Path, out: Path, factor: int) -> dict:
     return report
 
 
+# -- the licensed fixture (tests/fixtures/real/slmaster_eye; runs here, once) ----------------
+
+#: The public capture the committed fixture derives from: ``data/monocularCamera`` of
+#: github.com/Practice3DVision/SLMaster at this commit, where the repository's LICENSE is
+#: MIT (it became AGPL-3.0 on 2024-04-08, commit cc64865; the data are unchanged since).
+SLMASTER_REPO = "Practice3DVision/SLMaster"
+SLMASTER_COMMIT = "592a368b1f8136a07ea1281e8bb2948a2435f45a"
+SLMASTER_DATA = "data/monocularCamera"
+#: The committed fixture.
+FIXTURE = ROOT / "tests" / "fixtures" / "real" / "slmaster_eye"
+#: Its crop of the 1280 x 1024 frames, full-size px ``(x0, y0, width, height)`` (the plaster
+#: relief and a margin of background), binned ``FIXTURE_BIN x FIXTURE_BIN``: 256 x 256 px.
+FIXTURE_CROP = (428, 346, 512, 512)
+FIXTURE_BIN = 2
+#: The capture's sequence (SLMaster's ``SinusCompleGrayCodePattern`` as its monocular
+#: camera's configuration sets it: 12 steps, 32 periods over the DLP4710's 1920 columns).
+FIXTURE_SEQUENCE = """\
+# SLMaster's monocular capture (github.com/Practice3DVision/SLMaster@592a368,
+# data/monocularCamera/L/0-17.bmp), as its pattern generator writes the frames
+# (src/algorithm/cpuStructuredLight/sinus_comple_graycode_pattern.cpp, generate()) with the
+# configuration of gui/qml/res/config/monocularCameraConfig.json: vertical fringes, 12 phase
+# steps, 32 periods over the 1920 columns (60 px each), 18 frames. Height 1080: the DLP4710's
+# rows (the configuration says 1024; vertical fringes do not depend on rows).
+#   frame i = 0..11: 127.5 + 127.5 cos(2 pi (x mod 60) / 60 - pi + 2 pi i / 12) for column x
+#     -> first_step: 0, offset -pi (offset_steps: -6), sign +1, period 60
+#   frames 12..16: Gray code of floor(x / 60), most significant bit first (blocks of
+#     1920 / 2^(b+1) px, reflected) -> bits: 5, msb_first, align: edge
+#   frame 17: the complementary frame, the last bit of the 6-bit Gray code of floor(x / 30)
+#     -> complement: true
+# No white or black frame: each code bit is thresholded at the phase frames' mean.
+format: virtus.pattern_sequence
+version: 2
+width: 1920
+height: 1080
+blocks:
+  - {kind: phase, direction: v, period: 60, steps: 12, first_step: 0, offset_steps: -6}
+  - {kind: gray, direction: v, period: 60, bits: 5, bit_order: msb_first, align: edge,
+     complement: true}
+"""
+#: Which node of SLMaster's ``caliInfo.yml`` is which (its ``reverseCamera`` builds the
+#: projector's matrix as ``M4 [Rlp | Tlp]``: camera to projector, millimetres).
+FIXTURE_MAPPING = """\
+# SLMaster's calibration (caliInfo.yml, OpenCV FileStorage, full-size 1280 x 1024 camera):
+# M1 D1 camera, M4 D4 projector (DLP4710, 1920 x 1080), Rlp Tlp camera -> projector in mm
+# (its depth recovery projects camera-frame points with M4 [Rlp | Tlp]).
+file: caliInfo.yml
+keys:
+  camera_K: M1
+  camera_dist: D1
+  projector_K: M4
+  projector_dist: D4
+  R: Rlp
+  T: Tlp
+units: mm
+convention: X_proj = R X_cam + T
+camera_size: [1280, 1024]
+projector_size: [1920, 1080]
+"""
+
+
+def _git_show(source: Path, path: str) -> bytes:
+    """``path`` at :data:`SLMASTER_COMMIT` of the git directory (bare or a clone) ``source``."""
+    import subprocess
+
+    done = subprocess.run(
+        ["git", "-C", str(source), "show", f"{SLMASTER_COMMIT}:{path}"],
+        capture_output=True,
+        check=False,
+    )
+    if done.returncode:
+        message = done.stderr.decode(errors="replace").strip()
+        raise SystemExit(f"{source}: no {path} at {SLMASTER_COMMIT[:7]} ({message})")
+    return done.stdout
+
+
+def cropped_rig(rig, crop: tuple[int, int, int, int], factor: int):
+    """``rig`` with its camera cropped to ``crop`` = ``(x0, y0, width, height)`` full-size px
+    (the principal point moves by ``-(x0, y0)``) and then binned ``factor x factor``
+    (:meth:`~virtus.geometry.optics.Intrinsics.scaled`: pixel edges kept). The focal lengths,
+    the distortion, the projector and ``proj2cam`` are unchanged."""
+    from virtus.geometry.devices import Camera, Rig
+    from virtus.geometry.optics import Intrinsics
+
+    x0, y0, width, height = crop
+    k = rig.camera.intrinsics
+    window = Intrinsics(k.fx, k.fy, k.cx - x0, k.cy - y0, width, height, k.dist)
+    return Rig(Camera(window.scaled(1 / factor)), rig.projector, rig.proj2cam)
+
+
+def make_fixture(source: Path, out: Path) -> dict:
+    """Derive the committed fixture from SLMaster's capture (module docstring): the 18
+    frames cropped to :data:`FIXTURE_CROP` and binned by :data:`FIXTURE_BIN` as PNG, the
+    sequence, the original calibration with its mapping, the rig of the cropped camera, the
+    licence and ``SOURCE.json`` (provenance and the source frames' SHA-256). Deterministic:
+    the same source gives the same bytes. ``README.md`` is written by hand."""
+    import hashlib
+    import io
+
+    from PIL import Image
+
+    from virtus.calib.io import load_calibration_report
+
+    licence = _git_show(source, "LICENSE")
+    if not licence.startswith(b"MIT License"):
+        raise SystemExit(f"{source}: LICENSE at {SLMASTER_COMMIT[:7]} is not MIT")
+    x0, y0, width, height = FIXTURE_CROP
+    (out / "images").mkdir(parents=True, exist_ok=True)
+    digests = {}
+    for index in range(18):
+        path = f"{SLMASTER_DATA}/L/{index}.bmp"
+        data = _git_show(source, path)
+        digests[path] = hashlib.sha256(data).hexdigest()
+        frame = np.asarray(Image.open(io.BytesIO(data)))
+        if frame.shape != (1024, 1280) or frame.dtype != np.uint8:
+            raise SystemExit(f"{path}: expected a 1280 x 1024 8-bit frame, got {frame.shape}")
+        binned = _bin(frame[y0 : y0 + height, x0 : x0 + width], FIXTURE_BIN)
+        Image.fromarray(binned).save(out / "images" / f"{index:02d}.png", optimize=True)
+    (out / "LICENSE").write_bytes(licence)
+    (out / "caliInfo.yml").write_bytes(_git_show(source, f"{SLMASTER_DATA}/caliInfo.yml"))
+    (out / "calibration.yaml").write_text(FIXTURE_MAPPING)
+    (out / "sequence.yaml").write_text(FIXTURE_SEQUENCE)
+    full, _ = load_calibration_report(out / "calibration.yaml")
+    cropped_rig(full, FIXTURE_CROP, FIXTURE_BIN).save_json(out / "rig.json")
+    report = {
+        "source": f"https://github.com/{SLMASTER_REPO}",
+        "commit": SLMASTER_COMMIT,
+        "path": SLMASTER_DATA,
+        "licence": "MIT (LICENSE at that commit; AGPL-3.0 from cc64865, 2024-04-08)",
+        "crop_xywh_px": list(FIXTURE_CROP),
+        "bin": FIXTURE_BIN,
+        "sha256": digests,
+    }
+    (out / "SOURCE.json").write_text(json.dumps(report, indent=1) + "\n")
+    report["bytes"] = sum(f.stat().st_size for f in out.rglob("*") if f.is_file())
+    return report
+
+
+def prepare_fixture(fixture: Path, out: Path) -> dict:
+    """What ``run`` reads, from the committed fixture: ``out/capture`` (``virtus import`` of
+    its frames with its sequence and rig), ``out/rig.json`` and ``out/SOURCE.json`` naming
+    the bench (``slmaster-eye``: vertical fringes). No light is fitted (the capture has no
+    white or black frame, which the fit needs): ``realistic`` uses the presets. Idempotent."""
+    import shutil
+
+    from virtus.capture.capture import Capture
+    from virtus.pipeline.capture import import_images
+
+    out.mkdir(parents=True, exist_ok=True)
+    if not (out / "capture" / "capture.json").is_file():
+        import_images(
+            fixture / "images", fixture / "sequence.yaml", fixture / "rig.json", out / "capture"
+        )
+    shutil.copyfile(fixture / "rig.json", out / "rig.json")
+    decoded = Capture.load(out / "capture").decode()
+    report = {
+        "bench": "slmaster-eye",
+        "source": json.loads((fixture / "SOURCE.json").read_text()),
+        "fixture": str(fixture),
+        "fit_error": "no white or black frames: the presets stand for the fitted devices",
+        "reference_valid_fraction": float(decoded.mask_v.mean()),
+    }
+    (out / "SOURCE.json").write_text(json.dumps(report, indent=1, default=float))
+    return report
+
+
 # -- run (GPU or a tiny CPU check) -----------------------------------------------------------
 
 
@@ -220,12 +440,39 @@ def _devices(real: Path, variant: str) -> tuple[list[str], list[str]]:
     return ["imx174"], ["lightcrafter"]
 
 
+def bench_of(real: Path) -> dict:
+    """The :data:`BENCHES` entry of a prepared folder (its ``SOURCE.json``'s ``bench``)."""
+    source = real / "SOURCE.json"
+    name = json.loads(source.read_text()).get("bench") if source.is_file() else None
+    name = name or "lightcrafter-lab"
+    if name not in BENCHES:
+        raise SystemExit(f"{source}: unknown bench {name!r} (known: {sorted(BENCHES)})")
+    return {"name": name, **BENCHES[name]}
+
+
+def _bench_dataset(real: Path, bench: dict) -> dict:
+    """The bench's changes to :data:`TEMPLATE`; the fixture's own sequence for
+    ``slmaster-eye`` (the one its capture was taken with)."""
+    changes = dict(bench["dataset"])
+    if "fringes" in changes:
+        source = json.loads((real / "SOURCE.json").read_text())
+        sequence = Path(source.get("fixture", FIXTURE)) / "sequence.yaml"
+        changes["fringes"] = {
+            "codings": [],
+            "sequences": [str(sequence.resolve())],
+            "directions": [bench["direction"]],
+        }
+    return changes
+
+
 def dataset_config(real: Path, variant: str, num: int):
-    """The template with the real rig, the variant's devices and ``num`` samples."""
+    """The template with the bench's scenes and sequence (:data:`BENCHES`), the real rig,
+    the variant's devices and ``num`` samples."""
     from virtus.data import DatasetConfig
     from virtus.io.safeio import read_yaml
 
     data = read_yaml(TEMPLATE, "dataset config", expect=dict)
+    data.update(_bench_dataset(real, bench_of(real)))
     sensors, projectors = _devices(real, variant)
     data.update(
         num_samples=num,
@@ -236,20 +483,20 @@ def dataset_config(real: Path, variant: str, num: int):
     return DatasetConfig.from_dict(data, base_dir=TEMPLATE.parent)
 
 
-def _train_config(args: argparse.Namespace):
+def _train_config(args: argparse.Namespace, bench: dict):
     from virtus.learn import TrainConfig
 
     return TrainConfig.from_dict(
         {
             "model": "phase",
-            "direction": "h",
+            "direction": bench["direction"],
             "base_channels": args.base_channels,
             "levels": args.levels,
             "epochs": 100_000,  # max_steps decides: every variant takes the same steps
             "max_steps": args.steps,
             "batch_size": args.batch_size,
             "lr": args.lr,
-            "depth_range_m": 0.05,  # depth L1 in units of 5 cm (the scenes' depth span)
+            "depth_range_m": bench["depth_range_m"],
             "depth_weight": args.depth_weight,
             "checkpoint_every": 100,
             "workers": args.loader_workers,
@@ -271,7 +518,8 @@ def run(args: argparse.Namespace) -> dict:
     if not (real / "capture" / "capture.json").is_file() or not (real / "rig.json").is_file():
         raise SystemExit(f"{real}: no prepared capture (run `prepare` first)")
     args.out.mkdir(parents=True, exist_ok=True)
-    config = _train_config(args)
+    bench = bench_of(real)
+    config = _train_config(args, bench)
     results, timings = {}, {}
     for variant in args.variants:
         store, run_dir = args.out / f"{variant}.zarr", args.out / f"run-{variant}"
@@ -294,7 +542,13 @@ def run(args: argparse.Namespace) -> dict:
             "test": evaluate(run_dir, store, "test", device=args.device),
             "real": evaluate_captures(run_dir, [real / "capture"], device=args.device),
         }
-    return {"config": config.to_dict(), "results": results, "timings_s": timings}
+    return {
+        "bench": bench["name"],
+        "reference": bench["reference"],
+        "config": config.to_dict(),
+        "results": results,
+        "timings_s": timings,
+    }
 
 
 def _fmt(value: float | None, width: int) -> str:
@@ -305,7 +559,7 @@ def _print(summary: dict, args: argparse.Namespace) -> None:
     print(
         f"\nsim-to-real on {summary['device']}: phase head, {args.num} samples per store, "
         f"{args.steps} steps, batch {args.batch_size}, width {args.base_channels}; real: "
-        f"{args.real / 'capture'} (reference: its 18-step + Gray-code phase)"
+        f"{args.real / 'capture'} ({summary['bench']}; reference: {summary['reference']})"
     )
     print(
         f"{'trained on':14} {'sim phase rad':>13} {'sim obj MAE mm':>15} {'real phase rad':>15} "
@@ -328,6 +582,12 @@ def _arguments() -> argparse.Namespace:
     p.add_argument("source", type=Path, help="clone or bare git dir of the capture's repo")
     p.add_argument("--out", type=Path, required=True, help="e.g. .gpu-work/real")
     p.add_argument("--bin", type=int, default=4, help="binning factor (4: 484 x 366)")
+    f = sub.add_parser("fixture", help="derive the committed SLMaster fixture (runs here, once)")
+    f.add_argument("source", type=Path, help=f"clone or bare git dir of {SLMASTER_REPO}")
+    f.add_argument("--out", type=Path, default=FIXTURE, help="default: the committed fixture")
+    q = sub.add_parser("prepare-fixture", help="the run folder of the committed fixture")
+    q.add_argument("fixture", type=Path, nargs="?", default=FIXTURE)
+    q.add_argument("--out", type=Path, required=True, help="e.g. .gpu-work/real-slmaster")
     r = sub.add_parser("run", help="stores, training and evaluation")
     add = r.add_argument
     add("real", type=Path, help="the folder `prepare` wrote")
@@ -351,6 +611,12 @@ def main() -> None:
     args = _arguments()
     if args.step == "prepare":
         print(json.dumps(prepare(args.source, args.out, args.bin), indent=1, default=float))
+        return
+    if args.step == "fixture":
+        print(json.dumps(make_fixture(args.source, args.out), indent=1))
+        return
+    if args.step == "prepare-fixture":
+        print(json.dumps(prepare_fixture(args.fixture, args.out), indent=1, default=float))
         return
     import torch
 
