@@ -25,6 +25,14 @@ def test_phase_model_on_a_capture(phase_run, tmp_path, capsys) -> None:
     assert 0 < summary["phase_rmse_rad"] <= np.pi
     on_disk = json.loads((phase_run / "evaluations" / "captures.json").read_text())
     assert on_disk["phase_rmse_rad"] == summary["phase_rmse_rad"]
+    # its depth maps beside the metrics: predicted, multi-step reference, their difference (mm)
+    (entry,) = on_disk["maps"]
+    maps = np.load(phase_run / "evaluations" / entry["file"])
+    predicted, reference, error = maps
+    assert maps.shape[0] == 3 and entry["unit"] == "mm" and np.isfinite(reference).mean() > 0.9
+    np.testing.assert_allclose(error, predicted - reference, atol=1e-3, equal_nan=True)
+    mae = np.nanmean(np.abs(error))
+    assert mae == pytest.approx(summary["object_mae_mm"], rel=1e-3)
     code, out, _ = run_cli(["learn", "eval", phase_run, "--captures", capture, "--json"], capsys)
     assert code == 0 and json.loads(out)["samples"] == 1
 

@@ -8,7 +8,9 @@ calibration through the same :class:`~virtus.learn.triangulate.DepthLayer`. A ph
 wrapped phase is unwrapped with the reference's fringe order (what the capture's code frames
 give), so its phase error at the wrap shows as order errors. Metrics
 (:mod:`virtus.learn.metrics`) count every reference-valid pixel as "object": phase RMSE
-(rad), fringe-order error rate and depth MAE/RMSE (mm) against the multi-step depth.
+(rad), fringe-order error rate and depth MAE/RMSE (mm) against the multi-step depth. The
+first :data:`~virtus.learn.training.MAP_SAMPLES` captures' predicted, reference and error
+depth maps (mm) are saved beside the metrics, as for a store (``virtus report`` draws them).
 """
 
 from __future__ import annotations
@@ -31,7 +33,11 @@ def _capture_record(capture: Any) -> dict[str, Any]:
     return {"sequence": capture.sequence.to_dict(), "n_frames": len(capture.sequence)}
 
 
-def _one(config: Any, model: Any, capture: Any, directory: Path) -> dict[str, Any]:
+def _one(
+    config: Any, model: Any, capture: Any, directory: Path
+) -> tuple[dict[str, Any], np.ndarray]:
+    """The errors of one capture and its ``(3, H, W)`` float32 depth maps in mm (predicted,
+    multi-step reference, their difference; NaN where the reference is invalid)."""
     torch = require_torch()
     from virtus.learn.triangulate import DepthLayer
 
@@ -83,7 +89,9 @@ def _one(config: Any, model: Any, capture: Any, directory: Path) -> dict[str, An
             "valid": valid,
         }
     depth = np.where(valid, ref_depth, 0.0)
-    return sample_errors(pred, depth, valid, valid, **extra)
+    maps = np.stack([np.where(valid, pred, np.nan), np.where(valid, ref_depth, np.nan)])
+    maps = (np.concatenate([maps, maps[:1] - maps[1:]]) * 1e3).astype(np.float32)
+    return sample_errors(pred, depth, valid, valid, **extra), maps
 
 
 def evaluate_captures(
@@ -102,20 +110,25 @@ def evaluate_captures(
         lacks the model's input frame or the phase frames of its ``direction``.
     """
     from virtus.capture import Capture
-    from virtus.learn.training import load_model
+    from virtus.learn.training import MAP_SAMPLES, load_model, write_maps
 
     if not captures:
         raise InputError("captures", "at least one capture directory", "none")
     config, model = load_model(run_dir, device)
     model.eval()
     sums = MetricSums()
-    for directory in captures:
+    maps: list[tuple[int, np.ndarray]] = []
+    for position, directory in enumerate(captures):
         capture = Capture.load(directory)
-        sums.add(_one(config, model, capture, Path(directory)))
+        errors, depth_maps = _one(config, model, capture, Path(directory))
+        sums.add(errors)
+        if position < MAP_SAMPLES:
+            maps.append((position, depth_maps))
     summary = {
         "captures": [str(Path(c).resolve()) for c in captures],
         "reference": "multi-step phase of the same capture",
         **sums.summary(),
     }
+    summary["maps"] = write_maps(Path(run_dir) / "evaluations", name, maps)
     write_json_atomic(Path(run_dir) / "evaluations" / f"{name}.json", summary)
     return summary

@@ -469,13 +469,14 @@ def evaluate(
     label = name or f"{Path(store).name}-{split or 'all'}" + (
         "-decode" if unwrap == "decode" else ""
     )
-    summary["maps"] = _write_maps(Path(run_dir) / "evaluations", label, maps)
+    summary["maps"] = write_maps(Path(run_dir) / "evaluations", label, maps)
     write_json_atomic(Path(run_dir) / "evaluations" / f"{label}.json", summary)
     return summary
 
 
-def _write_maps(folder: Path, label: str, maps: list[tuple[int, np.ndarray]]) -> list[dict]:
-    """Save each ``(index, maps)`` as ``folder/label/sample_NNNNNN.npy`` (written atomically);
+def write_maps(folder: Path, label: str, maps: list[tuple[int, np.ndarray]]) -> list[dict]:
+    """Save each ``(index, maps)`` (index: a store's sample, or a capture's position in the list)
+    as ``folder/label/sample_NNNNNN.npy`` (written atomically);
     the entries (file relative to ``folder``, sample index, sha256) for the summary."""
     entries = []
     for index, values in maps:

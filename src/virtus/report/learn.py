@@ -104,7 +104,7 @@ def _add_evaluation(page: Page, path: Path, file: Path) -> None:
     section.table("metrics (mm, rad)", {k: v for k, v in data.items() if k != "maps"})
     maps = [m for m in data.get("maps", []) if isinstance(m, dict)]
     if not maps:
-        section.note("This evaluation saved no depth maps (captures, or an older virtus).")
+        section.note("This evaluation saved no depth maps (an older virtus).")
     for entry in maps[:MAX_MAPS]:
         target = path / EVALUATIONS_DIR / str(entry.get("file"))
         if not target.resolve().is_relative_to((path / EVALUATIONS_DIR).resolve()):
