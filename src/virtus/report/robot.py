@@ -48,8 +48,10 @@ def add_robot_scan(page: Page, path: Path) -> dict[str, Any]:
                  registration="merged by the arm's kinematics alone (no registration)")  # fmt: skip
     icp = [e for e in data.get("c2m_icp", []) if isinstance(e, dict)]
     if icp:
-        how = {"views": "views registered onto each other (ICP, no mesh)",
-               "mesh": "each view registered onto the scene's mesh (ICP, evaluation aid)"}
+        how = {
+            "views": "views registered onto each other (ICP, no mesh)",
+            "mesh": "each view registered onto the scene's mesh (ICP, evaluation aid)",
+        }
         label = how.get(str(data.get("icp")), f"after ICP ({data.get('icp')})")
         scan.add_c2m(page, icp, "Cloud-to-mesh distance, after ICP", C2M_MAE_MM,
                      registration=label)  # fmt: skip
