@@ -56,8 +56,8 @@ Units: metres, degrees where a key says ``_deg``, projector px for periods.
 ``gpu`` (nvCOMP, ``pip install virtus-fpp[gpu]``; only for the codecs ``zstd`` and
 ``shuffle-zstd``, refused without nvCOMP or a CUDA device) or ``auto`` (the GPU where that
 works, else the CPU, and the run says so). The default is ``cpu``: on one H200 host with 8
-workers the GPU's zstd was the slower (:mod:`virtus.data.chunkcodecs`). The arrays are the same either way, so it is not
-part of a store's identity: a store may be resumed with another one
+workers the GPU's zstd was the slower. The arrays are the same either way, so it is not part
+of a store's identity: a store may be resumed with another one
 (:mod:`virtus.data.chunkcodecs`).
 """
 

@@ -33,7 +33,6 @@ Frames: the world frame is the camera frame (``cam2world`` is the identity); pos
 from __future__ import annotations
 
 import fcntl
-
 import functools
 import math
 from dataclasses import dataclass, field
