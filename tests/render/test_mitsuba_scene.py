@@ -72,3 +72,37 @@ def test_a_mesh_edited_to_lie_behind_the_camera_is_refused(tmp_path) -> None:
     os.utime(path, (past, past))
     with pytest.raises(InputError, match="in front of the camera"):
         centre_depth(scene)
+
+
+def _reflectance(image: np.ndarray):  # noqa: ANN202
+    """The Mitsuba texture the renderer makes for an albedo image."""
+    from virtus.render.backend import mitsuba
+    from virtus.render.mitsuba_scene import bsdf_dict
+    from virtus.scene.model import Material
+
+    mi, _, _ = mitsuba(VARIANT)
+    return bsdf_dict(mi, Material(specular=0.0), albedo=image)["bsdf"]["reflectance"]
+
+
+def test_a_read_only_image_keeps_its_texture_until_it_can_change() -> None:
+    image = np.full((8, 8), 0.5)
+    image.setflags(write=False)  # owns its data: nothing can change it now
+    texture = _reflectance(image)
+    assert _reflectance(image) is texture
+    image.setflags(write=True)
+    image[2, 3] = 0.25
+    changed = _reflectance(image)
+    assert changed is not texture
+    assert _reflectance(image) is changed  # writeable: reused while its contents are equal
+    image[2, 3] = 0.75
+    assert _reflectance(image) is not changed
+
+
+def test_a_read_only_view_of_a_writeable_array_is_compared_by_contents() -> None:
+    base = np.full((8, 8), 0.5)
+    view = base[:, :]
+    view.setflags(write=False)  # read-only, but its base can still change it
+    texture = _reflectance(view)
+    assert _reflectance(view) is texture
+    base[0, 0] = 0.0
+    assert _reflectance(view) is not texture
