@@ -36,8 +36,11 @@ __all__ = [
 
 #: Most worker processes a caller may ask for.
 MAX_OBSERVE_PROCESSES = 8
-#: Most threads that observe poses by default (one per CPU up to this).
-MAX_OBSERVE_THREADS = 8
+#: Most threads that observe poses by default (one per CPU up to this). On an H200 host (16
+#: cores) 18 decoded poses were observed in 1.27-1.53 s by 4 threads, 1.35-1.78 s by 8 and
+#: 1.73-2.19 s by 16 (``benchmarks/bench_calibrate.py``): beyond 4 they only contend for the
+#: GIL -- with the thread that renders the next pose (33 ms a pose alone, 105 ms beside 8).
+MAX_OBSERVE_THREADS = 4
 
 
 @dataclass(frozen=True)
