@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import pytest
@@ -67,3 +68,17 @@ def phase_run(learn_store, tmp_path_factory) -> Path:
     run = tmp_path_factory.mktemp("phase-run") / "run"
     train(TrainConfig.from_dict({"model": "phase", **TINY_NET, "epochs": 1}), learn_store, run)
     return run
+
+
+#: The benchmarks folder (not a package): bench_sim2real is tested as a module.
+BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
+
+
+def bench_sim2real():
+    """``benchmarks/bench_sim2real.py`` imported as a module."""
+    sys.path.insert(0, str(BENCHMARKS))
+    try:
+        import bench_sim2real as module
+    finally:
+        sys.path.remove(str(BENCHMARKS))
+    return module

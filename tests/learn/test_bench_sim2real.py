@@ -6,7 +6,6 @@ heads of the same steps, their metrics on the capture, and a rerun that resumes.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -14,16 +13,7 @@ import pytest
 
 pytest.importorskip("torch")
 
-BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
-
-
-def _bench():
-    sys.path.insert(0, str(BENCHMARKS))
-    try:
-        import bench_sim2real
-    finally:
-        sys.path.remove(str(BENCHMARKS))
-    return bench_sim2real
+from tests.learn.conftest import bench_sim2real  # noqa: E402
 
 
 def _prepared(folder: Path, sequence_file: Path) -> Path:
@@ -60,7 +50,7 @@ def _prepared(folder: Path, sequence_file: Path) -> Path:
 
 
 def test_the_benchmark_runs_and_resumes(tmp_path) -> None:
-    bench = _bench()
+    bench = bench_sim2real()
     real = _prepared(tmp_path / "real", bench.SEQUENCE)
     args = argparse.Namespace(
         real=real, out=tmp_path / "out", variants=["realistic", "ideal"], num=10, steps=2,

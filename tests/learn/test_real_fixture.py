@@ -13,29 +13,19 @@ from __future__ import annotations
 
 import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from tests.data.test_dataset import run_cli
+from tests.learn.conftest import bench_sim2real
 
 FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "real" / "slmaster_eye"
-BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
 #: The fixture's budget (the issue's "small derived fixture"), bytes.
 MAX_BYTES = 1_500_000
 #: Frames of the sequence: 12 phase steps, 5 Gray bits, the complementary frame.
 N_FRAMES = 18
-
-
-def _bench():
-    sys.path.insert(0, str(BENCHMARKS))
-    try:
-        import bench_sim2real
-    finally:
-        sys.path.remove(str(BENCHMARKS))
-    return bench_sim2real
 
 
 @pytest.fixture(scope="module")
@@ -54,7 +44,7 @@ def test_the_fixture_is_small_licensed_and_traceable() -> None:
     licence = (FIXTURE / "LICENSE").read_text()
     assert licence.startswith("MIT License") and "Copyright (c) 2024 Liu Yunhuang" in licence
     source = json.loads((FIXTURE / "SOURCE.json").read_text())
-    bench = _bench()
+    bench = bench_sim2real()
     assert source["commit"] == bench.SLMASTER_COMMIT and len(source["sha256"]) == N_FRAMES
     readme = (FIXTURE / "README.md").read_text()
     assert bench.SLMASTER_COMMIT in readme and "MIT" in readme
@@ -73,7 +63,7 @@ def test_the_rig_is_the_source_calibration_cropped_and_binned() -> None:
     from virtus.calib.io import load_calibration_report
     from virtus.geometry.devices import Rig
 
-    bench = _bench()
+    bench = bench_sim2real()
     full, _ = load_calibration_report(FIXTURE / "calibration.yaml")
     rig = Rig.load_json(FIXTURE / "rig.json")
     x0, y0, _, _ = bench.FIXTURE_CROP
@@ -153,7 +143,7 @@ def test_learn_eval_runs_on_the_fixture(phase_run, imported, capsys) -> None:
 def test_the_sim2real_bench_prepares_the_fixture(tmp_path) -> None:
     """``prepare-fixture`` writes what ``run`` reads; ``run``'s stores then use the
     fixture's sequence and vertical fringes, its rig, and scenes at the relief's standoff."""
-    bench = _bench()
+    bench = bench_sim2real()
     real = tmp_path / "real"
     report = bench.prepare_fixture(FIXTURE, real)
     assert report["bench"] == "slmaster-eye" and report["reference_valid_fraction"] > 0.7
