@@ -28,7 +28,7 @@ from virtus.sensor.projector import Lookup, ProjectorModel
 if TYPE_CHECKING:
     from virtus.render.settings import RenderSettings
 
-__all__ = ["DecodedView", "Scanner"]
+__all__ = ["DecodedMaps", "DecodedView", "Scanner"]
 
 
 def _default_render() -> RenderSettings:
@@ -51,6 +51,21 @@ class DecodedView:
     """
 
     decoded: DecodeResult
+    white: np.ndarray | None
+
+
+@dataclass(frozen=True, eq=False)
+class DecodedMaps:
+    """Some fields of a pose's decode and its white frame (:meth:`Scanner.decoded_maps`).
+
+    Attributes
+    ----------
+    maps : the asked :class:`~virtus.patterns.DecodeResult` fields by name, equal to those of
+        :attr:`DecodedView.decoded`.
+    white : (H, W) the sequence's first white frame (digital numbers), or None without one.
+    """
+
+    maps: dict[str, np.ndarray]
     white: np.ndarray | None
 
 
@@ -225,6 +240,38 @@ class Scanner:
         only the decode and the white frame are copied. Otherwise this is exactly
         ``capture(...).decode()``.
         """
+        decoded, white = self._decode(scene, cam2world, rng, on_device, None)
+        return DecodedView(decoded, white)
+
+    def decoded_maps(
+        self,
+        scene: Any,
+        fields: tuple[str, ...],
+        *,
+        cam2world: Pose | None = None,
+        rng: np.random.Generator | int | None = None,
+        on_device: bool | None = None,
+    ) -> DecodedMaps:
+        """:meth:`decoded_view` for only some of the decode's fields, bit for bit: names of
+        :data:`virtus.render.jit.decode.HOST_FIELDS` (e.g. ``("proj_uv", "background")``, what
+        a calibration observes). On the device only these are formed and copied (with the
+        white frame), not the whole decode (:meth:`DeviceDecode.to_host
+        <virtus.render.jit.decode.DeviceDecode.to_host>`)."""
+        from virtus.render.jit.decode import host_field_names
+
+        names = tuple(host_field_names(fields))
+        maps, white = self._decode(scene, cam2world, rng, on_device, names)
+        return DecodedMaps(maps, white)
+
+    def _decode(
+        self,
+        scene: Any,
+        cam2world: Pose | None,
+        rng: np.random.Generator | int | None,
+        on_device: bool | None,
+        only: tuple[str, ...] | None,
+    ) -> tuple[Any, np.ndarray | None]:
+        """The decode (or its fields ``only``) and the white frame of one rendered pose."""
         kinds = [frame.kind for frame in self.sequence.frames]
         white = kinds.index("white") if "white" in kinds else None
         if on_device is None:
@@ -232,7 +279,10 @@ class Scanner:
         if not on_device:
             capture = self.capture(scene, cam2world=cam2world, rng=rng, command=[])
             frame = None if white is None else capture.frames[white]
-            return DecodedView(capture.decode(), frame)
+            decoded = capture.decode()
+            if only is None:
+                return decoded, frame
+            return {name: getattr(decoded, name) for name in only}, frame
         from virtus.render.jit.decode import decode_on_device
 
         frames = self.render_on_device(scene, cam2world=cam2world, rng=rng).frames
@@ -242,9 +292,9 @@ class Scanner:
             frames.height,
             frames.width,
             full_scale=self.sensor.full_scale,
-        ).to_host(self.sequence, neighbour_check=None)
+        ).to_host(self.sequence, neighbour_check=None, only=only)
         frame = None if white is None else frames.frame(white)
-        return DecodedView(decoded, frame)
+        return decoded, frame
 
     def capture(
         self,

@@ -67,6 +67,7 @@ __all__ = [
     "decode_code_only",
     "decode_frames",
     "runs_neighbour_check",
+    "warn_if_flagged",
 ]
 
 #: A pixel is flagged when its absolute phase lies farther than this from the centre of its
@@ -653,7 +654,14 @@ def _read_bits(stack: np.ndarray, code: CodePlan, threshold: np.ndarray) -> np.n
 
 def _warn_if_flagged(result: DecodeResult) -> None:
     valid = int(np.count_nonzero(result.mask_v | result.mask_h))
-    flagged = int(np.count_nonzero(result.flagged))
+    # stacklevel: PatternSequence.decode's line (DeviceDecode.to_host's on the device).
+    warn_if_flagged(valid, int(np.count_nonzero(result.flagged)), stacklevel=5)
+
+
+def warn_if_flagged(valid: int, flagged: int, *, stacklevel: int) -> None:
+    """Issue the :class:`DecodeWarning` of a decode with ``valid`` pixels valid in some
+    direction, ``flagged`` of them flagged, when more than :data:`FLAG_WARN_FRACTION` are
+    (``stacklevel`` as ``warnings.warn`` counts it from here)."""
     if valid and flagged > FLAG_WARN_FRACTION * valid:
         warnings.warn(
             f"decode: {flagged / valid:.1%} of valid pixels are flagged as likely fringe-order "
@@ -661,5 +669,5 @@ def _warn_if_flagged(result: DecodeResult) -> None:
             "does not match the frames (code alignment, bit order, periods, frame order); "
             "see DecodeResult.flagged and summary()",
             DecodeWarning,
-            stacklevel=4,  # PatternSequence.decode's line (DeviceDecode.to_host's on the device)
+            stacklevel=stacklevel,
         )

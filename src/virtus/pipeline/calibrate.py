@@ -397,7 +397,8 @@ def _rendered_view(
     scanner: Scanner, board: Board, pose: BoardPose, texture: np.ndarray, seed: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Decoded projector coordinates (H, W, 2), background (H, W) and white frame (or None)
-    of one pose rendered with ``scanner`` (:meth:`~virtus.scanner.Scanner.decoded_view`).
+    of one pose rendered with ``scanner`` (:meth:`~virtus.scanner.Scanner.decoded_maps`: on
+    the device only these maps are formed and copied, not the whole decode).
 
     On the host, with a white frame to detect the board in and a decode that is per pixel
     (no neighbour check), only the board's window (:func:`~virtus.calib.scene.board_window`,
@@ -411,8 +412,8 @@ def _rendered_view(
     window = board_window(scanner.rig.camera.intrinsics, board, pose.board2cam)
     per_pixel = not any(sequence.runs_neighbour_check(d, None, False) for d in sequence.directions)
     if scanner.renders_on_gpu or "white" not in kinds or window is None or not per_pixel:
-        view = scanner.decoded_view(scene, rng=seed)
-        return view.decoded.proj_uv, view.decoded.background, view.white
+        view = scanner.decoded_maps(scene, ("proj_uv", "background"), rng=seed)
+        return view.maps["proj_uv"], view.maps["background"], view.white
     capture = scanner.capture(scene, rng=seed, command=[])
     white = capture.frames[kinds.index("white")]
     part = sequence.decode(capture.frames[:, window[0], window[1]], full_scale=capture.full_scale)

@@ -34,8 +34,9 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 
@@ -51,10 +52,17 @@ from virtus.patterns import (
     PatternSequence,
 )
 from virtus.patterns import phase as _phase
-from virtus.patterns.decode import _RESIDUAL_INVALID_RAD
+from virtus.patterns.decode import _RESIDUAL_INVALID_RAD, warn_if_flagged
 from virtus.render.backend import mitsuba, variant_of
 
-__all__ = ["DeviceDecode", "decode_on_device", "frames_to_device", "supports"]
+__all__ = [
+    "HOST_FIELDS",
+    "DeviceDecode",
+    "decode_on_device",
+    "frames_to_device",
+    "host_field_names",
+    "supports",
+]
 
 TWO_PI = _phase.TWO_PI
 #: Unwrapping methods (``DecodePlan.method``) this module decodes.
@@ -63,6 +71,10 @@ METHODS = ("code", "temporal", "heterodyne", "window")
 PRECISIONS = ("float32", "float64")
 #: Bit planes of the packed validity word that :meth:`DeviceDecode.to_host` transfers.
 _BIT_MASK_V, _BIT_MASK_H, _BIT_FLAG_V, _BIT_FLAG_H = 1, 2, 4, 8
+_PER_DIRECTION = tuple(f"{kind}_{d}" for kind in ("phase", "modulation") for d in DIRECTIONS)
+#: :class:`~virtus.patterns.DecodeResult` fields (its real maps) that
+#: ``DeviceDecode.to_host(only=...)`` transfers alone.
+HOST_FIELDS = ("proj_uv", "background", "modulation", *_PER_DIRECTION)
 
 
 @dataclass(frozen=True, eq=False)
@@ -120,13 +132,34 @@ class DeviceDecode:
         """Every Dr.Jit array of the decode, in field order (for ``dr.eval``)."""
         return tuple(getattr(self, f.name) for f in fields(self)[:15])
 
+    @overload
+    def to_host(
+        self,
+        sequence: PatternSequence,
+        *,
+        neighbour_check: bool | None = ...,
+        repair: bool = ...,
+        only: None = ...,
+    ) -> DecodeResult: ...
+
+    @overload
+    def to_host(
+        self,
+        sequence: PatternSequence,
+        *,
+        neighbour_check: bool | None = ...,
+        repair: bool = ...,
+        only: Sequence[str],
+    ) -> dict[str, np.ndarray]: ...
+
     def to_host(
         self,
         sequence: PatternSequence,
         *,
         neighbour_check: bool | None = False,
         repair: bool = False,
-    ) -> DecodeResult:
+        only: Sequence[str] | None = None,
+    ) -> DecodeResult | dict[str, np.ndarray]:
         """The decode as the host's :class:`~virtus.patterns.DecodeResult`, from one transfer.
 
         Parameters
@@ -142,11 +175,16 @@ class DeviceDecode:
             phase and wrapped phase.
         repair : as ``decode(repair=True)``: give flagged pixels the order their neighbours
             agree on (turns the neighbour check on).
+        only : names of :data:`HOST_FIELDS` (e.g. ``("proj_uv", "background")``): just these
+            fields of the result, bit for bit. Without a neighbour check they are formed on
+            the device and transferred alone (views of one float64 buffer; the device fields
+            stay unevaluated); with one, they are picked from the whole result.
 
         Returns
         -------
-        :class:`~virtus.patterns.DecodeResult` (float64 maps of the device's values); a
-        :class:`~virtus.patterns.DecodeWarning` is issued as by ``decode``.
+        :class:`~virtus.patterns.DecodeResult` (float64 maps of the device's values), or with
+        ``only`` a dict of its fields by name; a :class:`~virtus.patterns.DecodeWarning` is
+        issued as by ``decode``.
         """
         if len(sequence) != self.frame_count or sequence.directions != self.directions:
             raise InputError(
@@ -157,6 +195,12 @@ class DeviceDecode:
         checks = {
             d: sequence.runs_neighbour_check(d, neighbour_check, repair) for d in self.directions
         }
+        if only is not None:
+            names = host_field_names(only)
+            if not any(checks.values()):
+                return self._host_fields(sequence, names)
+            whole = self.to_host(sequence, neighbour_check=neighbour_check, repair=repair)
+            return {name: getattr(whole, name) for name in names}
         planes = self._host_planes(any(checks.values()))
         shape = (self.height, self.width)
         bits = planes.pop("bits").astype(np.uint8)
@@ -191,6 +235,44 @@ class DeviceDecode:
             full_scale=self.full_scale,
         )
 
+    def _host_fields(self, sequence: PatternSequence, names: list[str]) -> dict[str, np.ndarray]:
+        """``to_host(only=names)`` without a neighbour check: the fields formed on the device
+        (one kernel, with the masks the flag warning counts), copied into one buffer (field
+        after field, components interleaved per pixel) and transferred once."""
+        mi, dr, _ = mitsuba(self.variant)
+        pixels = self.height * self.width
+        planes = {name: self._device_field(sequence, name) for name in names}
+        valid, flagged = self.mask_v | self.mask_h, self.flagged_v | self.flagged_h
+        # Scattered unevaluated, the decode is split over kernels that each recompute part.
+        dr.eval(*(part for parts in planes.values() for part in parts), valid, flagged)
+        starts = np.cumsum([0] + [len(parts) for parts in planes.values()]).tolist()
+        buffer = dr.empty(mi.Float64, starts[-1] * pixels)
+        pixel = dr.arange(mi.UInt32, pixels)
+        size = dr.opaque(mi.UInt32, pixels)  # a kernel parameter: one kernel for every size
+        for start, parts in zip(starts[:-1], planes.values(), strict=True):
+            for component, value in enumerate(parts):
+                dr.scatter(buffer, value, size * start + pixel * len(parts) + component)
+        host, out = buffer.numpy(), {}
+        for start, (name, parts) in zip(starts[:-1], planes.items(), strict=True):
+            shape = (self.height, self.width, len(parts))[: 2 + (len(parts) > 1)]
+            out[name] = host[start * pixels : (start + len(parts)) * pixels].reshape(shape)
+        counts = (int(dr.count(value)[0]) for value in (valid, flagged))
+        warn_if_flagged(*counts, stacklevel=3)  # to_host's line, as the whole result's
+        return out
+
+    def _device_field(self, sequence: PatternSequence, name: str) -> list[Any]:
+        """Float64 device values (per component) of field ``name``, as ``to_host`` forms it."""
+        mi, _, _ = mitsuba(self.variant)
+        if name == "proj_uv":  # PatternSequence._coordinate; NaN for an absent direction
+            phases = [mi.Float64(getattr(self, f"phase_{d}")) for d in DIRECTIONS]
+            return [
+                _coordinate(sequence, d, phase) if d in self.directions else phase
+                for d, phase in zip(DIRECTIONS, phases, strict=True)
+            ]
+        # "modulation": the host's minimum of the directions' minima over their phase sets
+        # is the minimum over all sets (exact; never NaN, frames are finite).
+        return [mi.Float64(getattr(self, name))]
+
     def _host_planes(self, wrapped: bool) -> dict[str, np.ndarray]:
         """(H, W) float64 host copies of the maps ``to_host`` needs, from one transfer: the
         planes are concatenated on the device (validity bits packed into one float plane)."""
@@ -217,6 +299,15 @@ class DeviceDecode:
             name: np.asarray(part, dtype=np.float64).reshape(shape)
             for name, part in zip(names, np.split(host, len(names)), strict=True)
         }
+
+
+def host_field_names(only: Sequence[str]) -> list[str]:
+    """``only`` of :meth:`DeviceDecode.to_host` checked: distinct names of
+    :data:`HOST_FIELDS` (a single name may be given as a string)."""
+    names = [only] if isinstance(only, str) else list(only)
+    if not names or len(set(names)) != len(names) or not set(names) <= set(HOST_FIELDS):
+        raise InputError("only", f"distinct names of {tuple(HOST_FIELDS)}", only)
+    return names
 
 
 def supports(sequence: PatternSequence) -> bool:
