@@ -6,6 +6,8 @@ from __future__ import annotations
 import errno
 import json
 import os
+import tempfile
+import time
 from pathlib import Path
 
 import pytest
@@ -15,6 +17,7 @@ from virtus.io.runs import (
     LOCK_FILE,
     RUN_FILE,
     TMP_DIR,
+    _remove_stale,
     atomic_write,
     atomic_write_files,
     claim_run,
@@ -251,41 +254,249 @@ def test_first_difference_names_the_path():
     )
 
 
-def test_a_staging_directory_removed_by_another_writer_is_made_again(tmp_path):
-    # Another process finishing its own write removes the shared staging directory when
-    # it is empty: here, right before this writer's first file.
+def test_a_staging_directory_removed_by_another_writer_is_made_again(tmp_path, monkeypatch):
+    # Another writer finishing its own write removes the shared .virtus-tmp when it is
+    # empty: here, between this writer's mkdir of it and the making of its own directory.
+    real_mkdtemp = tempfile.mkdtemp
     calls = []
 
-    def write(tmp):
-        calls.append(tmp)
+    def mkdtemp(*args, dir=None, **kwargs):
+        calls.append(dir)
         if len(calls) == 1:
-            tmp.parent.rmdir()  # the staging directory, still empty
-        tmp.write_text("{}")
+            Path(dir).rmdir()  # .virtus-tmp, still empty
+        return real_mkdtemp(*args, dir=dir, **kwargs)
 
-    atomic_write(tmp_path / "a.json", write)
+    monkeypatch.setattr(tempfile, "mkdtemp", mkdtemp)
+    atomic_write(tmp_path / "a.json", lambda tmp: tmp.write_text("{}"))
     assert len(calls) == 2
     assert (tmp_path / "a.json").read_text() == "{}"
     assert not (tmp_path / TMP_DIR).exists()
 
 
-def test_a_staging_directory_removed_while_mkdir_checks_it_is_made_again(tmp_path, monkeypatch):
+@pytest.mark.parametrize("made_again", [False, True], ids=["gone", "made-again"])
+def test_a_staging_directory_removed_while_mkdir_checks_it_is_made_again(
+    tmp_path, monkeypatch, made_again
+):
     # mkdir found the directory (another writer's), which was removed before mkdir checked
-    # that it is a directory: Path.mkdir raises FileExistsError for a path that is gone.
+    # that it is a directory: Path.mkdir raises FileExistsError for a path that is gone --
+    # or that a third writer has made again since (seen with 4 x 4 writers).
     real_mkdir = Path.mkdir
     raced = []
 
     def mkdir(self, *args, **kwargs):
         if self.name == TMP_DIR and not raced:
             raced.append(self)
+            if made_again:
+                real_mkdir(self)
             raise FileExistsError(17, "File exists", str(self))
         return real_mkdir(self, *args, **kwargs)
 
     monkeypatch.setattr(Path, "mkdir", mkdir)
     atomic_write(tmp_path / "a.json", lambda tmp: tmp.write_text("{}"))
     assert raced and (tmp_path / "a.json").read_text() == "{}"
+    assert not (tmp_path / TMP_DIR).exists()
     # A file (not a directory) in the staging directory's place is an error, not a retry.
     monkeypatch.setattr(Path, "mkdir", real_mkdir)
     (tmp_path / "sub").mkdir()
     (tmp_path / "sub" / TMP_DIR).write_text("not a directory")
     with pytest.raises(FileExistsError):
         atomic_write(tmp_path / "sub" / "b.json", lambda tmp: tmp.write_text("{}"))
+
+
+# -- writers of the same file at once ---------------------------------------------------------
+
+
+def _content(writer: int, round_: int) -> bytes:
+    """A writer's file: 64 KiB naming it, so a mix of two writers' files is seen."""
+    return f"writer {writer:03d} round {round_}\n".encode() * 3000
+
+
+def _write_in_step(target: Path, content: bytes, barrier) -> None:
+    """Write ``content`` to ``target``; every writer has staged its whole file before any
+    renames (the barrier), so the writers certainly overlap."""
+
+    def write(tmp: Path) -> None:
+        tmp.write_bytes(content)
+        barrier.wait(timeout=60)
+
+    atomic_write(target, write)
+
+
+def _assert_one_writers_file(target: Path, contents: set[bytes]) -> None:
+    assert target.read_bytes() in contents  # one writer's complete file, no mix
+    staging = target.parent / TMP_DIR
+    assert not staging.exists() or not any(staging.iterdir()), list(staging.rglob("*"))
+
+
+def test_threads_writing_the_same_name_at_once_never_collide(tmp_path):
+    # (With one staging directory shared by all writers, a writer's rename took another's
+    # file and the other's rename failed: FileNotFoundError on every round.)
+    import threading
+
+    target, threads, rounds = tmp_path / "same.bin", 12, 4
+    for round_ in range(rounds):
+        barrier = threading.Barrier(threads)
+        errors: list[BaseException] = []
+
+        def run(writer: int, barrier=barrier, round_=round_, errors=errors) -> None:
+            try:
+                _write_in_step(target, _content(writer, round_), barrier)
+            except BaseException as error:  # reported below, with the others
+                errors.append(error)
+                barrier.abort()
+
+        workers = [threading.Thread(target=run, args=(w,)) for w in range(threads)]
+        for worker in workers:
+            worker.start()
+        for worker in workers:
+            worker.join()
+        assert not errors, errors
+        _assert_one_writers_file(target, {_content(w, round_) for w in range(threads)})
+
+
+def _process_writer(target: Path, writer: int, rounds: int, barrier, failures) -> None:
+    for round_ in range(rounds):
+        try:
+            _write_in_step(target, _content(writer, round_), barrier)
+        except BaseException as error:
+            failures.put(f"writer {writer} round {round_}: {type(error).__name__}: {error}")
+            barrier.abort()
+            return
+
+
+def test_processes_writing_the_same_name_at_once_never_collide(tmp_path):
+    import multiprocessing
+
+    context = multiprocessing.get_context("fork")
+    target, processes, rounds = tmp_path / "same.bin", 4, 3
+    barrier, failures = context.Barrier(processes), context.SimpleQueue()
+    workers = [
+        context.Process(target=_process_writer, args=(target, w, rounds, barrier, failures))
+        for w in range(processes)
+    ]
+    for worker in workers:
+        worker.start()
+    for worker in workers:
+        worker.join(timeout=120)
+    found = []
+    while not failures.empty():
+        found.append(failures.get())
+    assert not found, found
+    assert [worker.exitcode for worker in workers] == [0] * processes
+    _assert_one_writers_file(target, {_content(w, rounds - 1) for w in range(processes)})
+
+
+def _killed_writer(target: Path, staged) -> None:
+    def write(tmp: Path) -> None:
+        tmp.write_text("half of it")
+        staged.set()
+        time.sleep(120)  # killed here
+
+    atomic_write(target, write)
+
+
+def test_a_killed_writers_staging_is_removed_by_a_later_write_a_live_ones_is_not(tmp_path):
+    import multiprocessing
+    import threading
+
+    context = multiprocessing.get_context("fork")
+    staged = context.Event()
+    killed = context.Process(target=_killed_writer, args=(tmp_path / "a.txt", staged))
+    killed.start()
+    assert staged.wait(timeout=60)
+    killed.kill()
+    killed.join(timeout=60)
+    left = list((tmp_path / TMP_DIR).iterdir())
+    assert [p.name for p in left[0].iterdir()] == ["a.txt"] and len(left) == 1
+    # A live writer (this process, waiting inside its write) keeps its staging directory
+    # while another write into the directory removes the killed one's.
+    in_write, release = threading.Event(), threading.Event()
+
+    def slow(tmp: Path) -> None:
+        tmp.write_text("live")
+        in_write.set()
+        release.wait(timeout=60)
+
+    live = threading.Thread(target=atomic_write, args=(tmp_path / "b.txt", slow))
+    live.start()
+    assert in_write.wait(timeout=60)
+    atomic_write(tmp_path / "c.txt", lambda tmp: tmp.write_text("c"))
+    remaining = list((tmp_path / TMP_DIR).iterdir())
+    assert left[0] not in remaining and len(remaining) == 1
+    assert [p.name for p in remaining[0].iterdir()] == ["b.txt"]
+    release.set()
+    live.join()
+    assert (tmp_path / "b.txt").read_text() == "live" and not (tmp_path / "a.txt").exists()
+    assert not (tmp_path / TMP_DIR).exists()
+
+
+def test_overwrite_removes_a_killed_writers_staging_and_never_follows_a_link(tmp_path):
+    with claim_run(tmp_path, "calibrate", CONFIG) as run:
+        run.write_json("poses/p1.json", {"a": 1})
+    stale = tmp_path / "poses" / TMP_DIR / "tmpkilled"  # no lock holder: a killed writer's
+    stale.mkdir(parents=True)
+    (stale / "p2.json").write_text("half")
+    with claim_run(tmp_path, "calibrate", {**CONFIG, "seed": 6}, overwrite=True):
+        pass
+    assert not (tmp_path / "poses").exists()
+    # A link in .virtus-tmp's place: nothing it points to is removed.
+    elsewhere = tmp_path / "elsewhere"
+    (elsewhere / "tmpnotmine").mkdir(parents=True)
+    (tmp_path / "linked").mkdir()
+    (tmp_path / "linked" / TMP_DIR).symlink_to(elsewhere)
+    assert _remove_stale(tmp_path / "linked" / TMP_DIR) == []
+    assert (elsewhere / "tmpnotmine").is_dir()
+
+
+def test_without_file_locks_writes_work_and_nothing_is_taken_for_stale(tmp_path, monkeypatch):
+    # A file system without flock (some network mounts): nothing tells a killed writer's
+    # staging from a live one's, so none is removed; the writes themselves still work.
+    import fcntl
+
+    real_flock = fcntl.flock
+    stale = tmp_path / TMP_DIR / "tmpkilled"
+    stale.mkdir(parents=True)
+
+    def no_locks(fd, operation):
+        raise OSError(errno.ENOLCK, os.strerror(errno.ENOLCK))
+
+    monkeypatch.setattr(fcntl, "flock", no_locks)
+    atomic_write(tmp_path / "a.txt", lambda tmp: tmp.write_text("a"))
+    assert (tmp_path / "a.txt").read_text() == "a" and stale.is_dir()
+    monkeypatch.setattr(fcntl, "flock", real_flock)
+    atomic_write(tmp_path / "a.txt", lambda tmp: tmp.write_text("b"))
+    assert (tmp_path / "a.txt").read_text() == "b" and not (tmp_path / TMP_DIR).exists()
+
+
+def test_a_staging_directory_taken_for_stale_before_it_was_locked_is_made_again(
+    tmp_path, monkeypatch
+):
+    # Another writer's sweep may find this writer's new directory in the instant between
+    # its making and its locking, and remove it: the writer makes another.
+    real_mkdtemp = tempfile.mkdtemp
+    made = []
+
+    def mkdtemp(*args, dir=None, **kwargs):
+        made.append(real_mkdtemp(*args, dir=dir, **kwargs))
+        if len(made) == 1:
+            assert _remove_stale(dir) == [Path(made[0]).name]  # not locked yet
+        return made[-1]
+
+    monkeypatch.setattr(tempfile, "mkdtemp", mkdtemp)
+    atomic_write(tmp_path / "a.txt", lambda tmp: tmp.write_text("a"))
+    assert len(made) == 2 and (tmp_path / "a.txt").read_text() == "a"
+    assert not (tmp_path / TMP_DIR).exists()
+
+
+def test_a_link_in_a_killed_writers_staging_is_removed_not_followed(tmp_path):
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / "a.txt").write_text("precious")
+    stale = tmp_path / "out" / TMP_DIR / "tmpkilled"
+    stale.mkdir(parents=True)
+    (stale / "a.txt").symlink_to(elsewhere / "a.txt")
+    (stale / "linked-dir").symlink_to(elsewhere)
+    atomic_write(tmp_path / "out" / "a.txt", lambda tmp: tmp.write_text("new"))
+    assert (tmp_path / "out" / "a.txt").read_text() == "new"
+    assert (elsewhere / "a.txt").read_text() == "precious"
+    assert not (tmp_path / "out" / TMP_DIR).exists()

@@ -501,9 +501,11 @@ class Randomiser:
         path = self.assets_dir / f"freeform_{shape_seed}_s{subdivisions}.stl"
         if path.is_file():
             return path
-        # Workers that draw the same shape at once would stage the same file name: one's
-        # rename takes the other's half-written file (seen with 12 GPU workers). One writer
-        # at a time per assets folder; the others find the file written.
+        # Workers that draw the same shape at once used to collide in a shared staging
+        # folder; atomic_write now stages each call apart, so that is safe without a lock.
+        # The lock stays so that the mesh is generated once, not once per worker that
+        # draws it (free-form meshes cost CPU time): one writer at a time per assets
+        # folder; the others wait, then find the file written.
         self.assets_dir.mkdir(parents=True, exist_ok=True)
         with open(self.assets_dir / ".freeform.lock", "a") as lock:
             fcntl.flock(lock, fcntl.LOCK_EX)

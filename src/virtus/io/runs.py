@@ -28,13 +28,16 @@ What a claim guarantees:
 * **Resume.** ``resume=True`` continues the run recorded in ``run.json``; its command,
   configuration, input checksums and virtus version must equal this run's, else the
   difference is named. Without a ``run.json``, a resumed run simply starts.
-* **Atomic files.** :func:`atomic_write` writes through a temporary file in ``.virtus-tmp/``
-  beside the target and ``os.replace``: a reader (or a resumed run) sees the old file or
-  the whole new one, never a partial file. Only a missing path or a regular file is
-  replaced: a device, FIFO, socket, directory or symbolic link in the target's place is
-  refused (:mod:`virtus.io.safewrite`), a link never followed. An ``OSError`` (disk full,
-  permission denied) removes the temporary file and always carries the target's path, so
-  the command line prints it as one line.
+* **Atomic files.** :func:`atomic_write` writes through a temporary file in a directory of
+  its own inside ``.virtus-tmp/`` beside the target and ``os.replace``: a reader (or a
+  resumed run) sees the old file or the whole new one, never a partial file, and writers
+  of the same file at once never touch each other's temporary files (the last rename
+  wins). A killed writer's temporary directory stays until a later write into the same
+  directory (or an ``overwrite``) finds it unlocked and removes it. Only a missing path or
+  a regular file is replaced: a device, FIFO, socket, directory or symbolic link in the
+  target's place is refused (:mod:`virtus.io.safewrite`), a link never followed. An
+  ``OSError`` (disk full, permission denied) removes the temporary file and always carries
+  the target's path, so the command line prints it as one line.
   Files are not fsync'ed: writes survive a killed process, not a power cut.
 """
 
@@ -46,6 +49,8 @@ import fcntl
 import hashlib
 import json
 import os
+import shutil
+import tempfile
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -67,7 +72,7 @@ RUN_FORMAT = "virtus.run/1"
 TMP_DIR = ".virtus-tmp"
 #: Longest wait (s) for a lock holder to write its pid (it does right after locking).
 _LOCK_OWNER_WAIT_S = 1.0
-#: Times a write is retried when another writer removed the shared staging directory.
+#: Times a staging directory is made again when another writer removed ``.virtus-tmp``.
 _STAGING_ATTEMPTS = 20
 #: Keys of ``run.json`` that must match for a run to be resumed.
 _IDENTITY = ("command", "virtus_version", "config", "inputs")
@@ -76,12 +81,12 @@ _IDENTITY = ("command", "virtus_version", "config", "inputs")
 # -- atomic files ---------------------------------------------------------------------------
 
 
-def _named(error: OSError, staging: Path, directory: Path, fallback: Path) -> OSError:
+def _named(error: OSError, staging: Path | None, directory: Path, fallback: Path) -> OSError:
     """``error`` naming the user's path: a staged file's target in ``directory`` (the
     staging copy is removed, naming it would mislead), ``fallback`` when it names none."""
     if error.filename is not None:
         where = Path(os.fsdecode(error.filename))
-        if where.parent != staging:
+        if staging is None or where.parent != staging:
             return error
         code = error.errno if error.errno is not None else errno.EIO
         named = type(error)(code, error.strerror or os.strerror(code), str(directory / where.name))
@@ -100,15 +105,23 @@ def atomic_write_files(
     (and again just before each rename) every target is looked at with ``os.lstat``
     (:func:`virtus.io.safewrite.check_replaceable`), and a device, FIFO, socket, directory
     or symbolic link is refused, naming it -- a link is never followed, so what it points to
-    is never touched. The staging directory may not be a symbolic link either.
+    is never touched. Neither ``directory/.virtus-tmp`` nor the staging directory may be a
+    symbolic link.
+
+    Any number of writers (threads or processes) may write the same names into the same
+    directory at once: each call stages in its own new directory, so the file that ends up
+    in place is one writer's complete file (the last rename wins). Staging directories that
+    a killed writer left are removed by a later write into the same directory
+    (:func:`_remove_stale`); those of live writers are told apart by the lock they hold.
 
     Parameters
     ----------
     directory : where the files go (created if needed).
     names : the file names ``write`` creates (plain names, no sub-directories).
-    write : called with the staging directory ``directory/.virtus-tmp`` (same file system,
-        so each rename is atomic; the files keep their names, so writers that choose a
-        format by extension work); it must write every name there.
+    write : called with this call's staging directory, a new directory inside
+        ``directory/.virtus-tmp`` (same file system, so each rename is atomic; the files
+        keep their names, so writers that choose a format by extension work); it must
+        write every name there.
 
     Returns
     -------
@@ -120,17 +133,20 @@ def atomic_write_files(
         link (nothing is written).
     OSError : from the writes or the renames, naming the target (a staged file's error
         names the file it was to replace; one that names no file gets the target, or
-        ``directory`` for several); the staging files are removed and targets not yet
+        ``directory`` for several); the staging directory is removed and targets not yet
         replaced are unchanged (each file is replaced atomically, the set is not).
     """
     directory = Path(directory)
-    staging = directory / TMP_DIR
+    shared = directory / TMP_DIR
     targets = [directory / name for name in names]
     for target in targets:
         check_replaceable(target)
-    check_not_link(staging, "staging directory")
+    check_not_link(shared, "staging directory")
+    staging: Path | None = None
+    lock = -1
     try:
-        _write_staged(staging, names, write)
+        staging, lock = _private_staging(shared)
+        write(staging)
         for name, target in zip(names, targets, strict=True):
             check_replaceable(target)  # again: it may have appeared while writing
             os.replace(staging / name, target)
@@ -140,51 +156,119 @@ def atomic_write_files(
             raise
         raise named from error
     finally:
-        for name in names:
-            with contextlib.suppress(OSError):
-                (staging / name).unlink(missing_ok=True)
-        with contextlib.suppress(OSError):  # still holds another writer's files
-            staging.rmdir()
+        if staging is not None:
+            _remove_staging(staging, names)
+        if lock >= 0:
+            os.close(lock)  # releases the lock, after the directory is gone
+        with contextlib.suppress(OSError):  # still holds another writer's staging
+            shared.rmdir()
     return targets
 
 
-def _write_staged(staging: Path, names: Sequence[str], write: Callable[[Path], object]) -> None:
-    """``write(staging)`` into a staging directory that other writers share: one that
-    finishes removes it when it is empty, which can happen between this writer's ``mkdir``
-    and its first file (seen with 12 dataset workers), or inside ``mkdir`` itself, between
-    finding the directory there and checking that it is one (seen with 16); then it is made
-    again and the write retried (nothing of this writer's was in it yet). Files a killed
-    writer left under ``names`` are removed first (writers open their file by name, so a
-    link left there would be followed)."""
+def _private_staging(shared: Path) -> tuple[Path, int]:
+    """A new staging directory inside ``shared`` (``.virtus-tmp``), locked by this writer:
+    ``(path, fd)``; closing ``fd`` releases the lock.
+
+    ``shared`` is common to all writers and one that finishes removes it when it is empty:
+    between this writer's ``mkdir`` and its ``mkdtemp``, or inside ``mkdir`` itself,
+    between finding the directory there and checking that it is one (seen with 12 and 16
+    dataset workers; there may even be a new one there by then, seen with 4 x 4 writers);
+    then it is made again. Once this writer's directory is inside,
+    ``shared`` is not empty and stays. The lock (``flock`` on the directory, held until
+    the directory is removed) tells :func:`_remove_stale` that the writer lives; one that
+    took the new directory for stale in the instant before it was locked has removed it,
+    which the inode check finds, and a new one is made."""
     for attempt in range(_STAGING_ATTEMPTS):
         last = attempt + 1 == _STAGING_ATTEMPTS
         try:
-            staging.mkdir(parents=True, exist_ok=True)
+            shared.mkdir(parents=True, exist_ok=True)
         except FileExistsError:  # there, then removed before mkdir's is_dir check
-            if staging.exists() or last:
+            if last or (shared.exists() and not shared.is_dir()):
+                raise  # (made again since by another writer: retried)
+            continue
+        check_not_link(shared, "staging directory")
+        _remove_stale(shared)
+        try:
+            staging = Path(tempfile.mkdtemp(dir=shared))
+            lock = os.open(staging, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW)
+        except FileNotFoundError:  # ``shared`` or the new directory removed meanwhile
+            if last:
                 raise
             continue
-        check_not_link(staging, "staging directory")
-        for name in names:
-            with contextlib.suppress(FileNotFoundError):
-                (staging / name).unlink()
         try:
-            write(staging)
-            return
+            # A file system without locks: unlocked, and no sweeper can lock it either.
+            with contextlib.suppress(OSError):
+                fcntl.flock(lock, fcntl.LOCK_EX)
+            check_not_link(shared, "staging directory")
+            if os.path.samestat(os.lstat(staging), os.fstat(lock)):
+                return staging, lock
         except FileNotFoundError:
-            if staging.is_dir() or last:
-                raise
+            pass
+        except BaseException:
+            os.close(lock)
+            with contextlib.suppress(OSError):
+                staging.rmdir()
+            raise
+        os.close(lock)
+    raise FileNotFoundError(errno.ENOENT, "staging directory kept disappearing", str(shared))
+
+
+def _remove_staging(staging: Path, names: Sequence[str]) -> None:
+    """Remove a writer's own staging directory (what ``write`` left there included)."""
+    for name in names:
+        with contextlib.suppress(OSError):
+            (staging / name).unlink(missing_ok=True)
+    try:
+        staging.rmdir()
+    except OSError:  # other files ``write`` made
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def _remove_stale(shared: str | os.PathLike[str]) -> list[str]:
+    """Remove the staging directories in ``shared`` (``.virtus-tmp``) that killed writers
+    left: those nobody holds the lock of (a live writer holds it from just after making its
+    directory until it has removed it; a killed one's lock went with its process). Files
+    directly in ``shared`` (left by earlier versions, which staged every writer's files
+    there) are left alone: nothing tells whether their writer lives. Returns the names
+    removed."""
+    removed: list[str] = []
+    flags = os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW
+    try:  # a link in .virtus-tmp's place is never followed: nothing elsewhere is removed
+        top = os.open(shared, flags)
+    except OSError:  # missing, a link, no directory
+        return removed
+    try:
+        for entry in list(os.scandir(top)):
+            if not entry.is_dir(follow_symlinks=False):
+                continue
+            try:
+                fd = os.open(entry.name, flags, dir_fd=top)
+            except OSError:  # removed meanwhile, or not ours to read
+                continue
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:  # a live writer's (or no locks on this file system: can't tell)
+                os.close(fd)
+                continue
+            try:
+                shutil.rmtree(entry.name, ignore_errors=True, dir_fd=top)
+                removed.append(entry.name)
+            finally:
+                os.close(fd)
+    finally:
+        os.close(top)
+    return removed
 
 
 def atomic_write(path: str | os.PathLike[str], write: Callable[[Path], object]) -> Path:
     """Write one file atomically: ``write(tmp)`` fills a temporary file that replaces ``path``.
 
-    The temporary file is ``<parent>/.virtus-tmp/<name>`` (see :func:`atomic_write_files`):
-    a reader sees the old file or the whole new one; on an ``OSError`` (raised with
-    ``path`` attached) the temporary file is removed and ``path`` is unchanged. A ``path``
-    that exists and is not a regular file (a device such as ``/dev/full``, a FIFO, a
-    directory, a symbolic link) is refused with :class:`InputError` before anything is
-    written.
+    The temporary file is ``<parent>/.virtus-tmp/<private>/<name>``, ``<private>`` this
+    call's own directory (see :func:`atomic_write_files`): a reader sees the old file or
+    the whole new one; on an ``OSError`` (raised with ``path`` attached) the temporary file
+    is removed and ``path`` is unchanged. A ``path`` that exists and is not a regular file
+    (a device such as ``/dev/full``, a FIFO, a directory, a symbolic link) is refused with
+    :class:`InputError` before anything is written.
     """
     path = Path(path)
     return atomic_write_files(path.parent, [path.name], lambda staging: write(staging / path.name))[
@@ -392,6 +476,7 @@ def _remove_files(path: Path, names: Sequence[str]) -> None:
     parents = set()
     for name in names:
         target = path / _relative(name)
+        # (a file of the target's name directly in .virtus-tmp: earlier versions' staging)
         for candidate in (target, target.parent / TMP_DIR / target.name):
             if candidate.is_file() or candidate.is_symlink():
                 candidate.unlink()
@@ -399,6 +484,8 @@ def _remove_files(path: Path, names: Sequence[str]) -> None:
         parents.add(relative.parent / TMP_DIR)
         parents.update(p for p in relative.parents if str(p) != ".")
     for parent in sorted(parents, key=lambda p: len(p.parts), reverse=True):
+        if parent.name == TMP_DIR:
+            _remove_stale(path / parent)  # killed writers' staging directories
         with contextlib.suppress(OSError):  # not empty: it holds other files
             (path / parent).rmdir()
 
