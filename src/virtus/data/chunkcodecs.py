@@ -187,20 +187,28 @@ def quiet_numcodecs() -> Iterator[None]:
         yield
 
 
-def shuffle_bytes(raw: np.ndarray, elementsize: int) -> np.ndarray:
+def shuffle_bytes(raw: np.ndarray, elementsize: int, out: np.ndarray | None = None) -> np.ndarray:
     """Byte shuffle as numcodecs' ``Shuffle`` does it: byte ``b`` of every element, for
     ``b = 0 .. elementsize - 1``, one after the other.
 
     Parameters
     ----------
     raw : (n * elementsize,) uint8, C-contiguous (whole elements).
-    elementsize : bytes an element (<= 1: ``raw`` itself).
+    elementsize : bytes an element (<= 1: no shuffle).
+    out : (n * elementsize,) uint8 to write into (None: ``raw`` itself when there is no
+        shuffle, else a new array).
     """
-    if elementsize <= 1:
-        return raw
-    if raw.size % elementsize:
+    if elementsize > 1 and raw.size % elementsize:
         raise ValueError(f"{raw.size} bytes are not whole elements of {elementsize} bytes")
-    return np.ascontiguousarray(raw.reshape(-1, elementsize).T).reshape(-1)
+    if out is None:
+        if elementsize <= 1:
+            return raw
+        out = np.empty_like(raw)
+    if elementsize > 1:
+        out.reshape(elementsize, -1)[...] = raw.reshape(-1, elementsize).T
+    else:
+        out[...] = raw
+    return out
 
 
 def piece_bounds(size: int, piece_bytes: int = PIECE_BYTES) -> list[tuple[int, int]]:
@@ -307,11 +315,7 @@ def stage_on_host(
     """Copy every chunk, byte-shuffled where its element size is > 1, to its ``start`` in
     ``staging`` (uint8, at least the layout's length: :func:`staging_layout`)."""
     for raw, size, start in zip(chunks, elementsizes, starts, strict=True):
-        target = staging[start : start + raw.size]
-        if size > 1:
-            target.reshape(size, -1)[...] = raw.reshape(-1, size).T
-        else:
-            target[...] = raw
+        shuffle_bytes(raw, size, out=staging[start : start + raw.size])
 
 
 class NvcompZstdFrames:
