@@ -160,6 +160,29 @@ class _Pose:
         return self.mi.UInt32(digital) >= self.mi.UInt32(self.sensor.saturation_dn)
 
 
+def _table_position(mi: Any, dr: Any, c: Any, last: Any, read: Lookup) -> tuple[Any, Any, Any]:
+    """Where projector coordinate ``c`` (Float, table entries) reads a row whose last entry
+    is ``last``: ``(left, right, fraction)`` -- UInt32, UInt32, Float for ``bilinear``;
+    ``(index, index, None)`` for ``nearest`` (the nearest entry). Clamped to the row."""
+    if read == Lookup.nearest:
+        index = mi.UInt32(dr.clip(dr.floor(c + 0.5), 0.0, last))
+        return index, index, None
+    x = dr.clip(c, 0.0, last)
+    left = dr.minimum(dr.floor(x), dr.maximum(last - 1.0, 0.0))
+    right = dr.minimum(left + 1.0, last)
+    return mi.UInt32(left), mi.UInt32(right), x - left
+
+
+def _read_table(mi: Any, dr: Any, table: Any, start: Any, position: tuple) -> Any:
+    """Float: the row starting at ``start`` read at ``position`` (:func:`_table_position`)."""
+    left, right, fraction = position
+    if fraction is None:  # nearest
+        return dr.gather(mi.Float, table, start + left)
+    value = dr.gather(mi.Float, table, start + left) * (1.0 - fraction)
+    value += dr.gather(mi.Float, table, start + right) * fraction
+    return value
+
+
 # --- LAYOUT_PIXEL: a lane per pixel, a symbolic loop over the frames ----------------------
 
 
@@ -182,18 +205,10 @@ def _tap_positions(pose: _Pose) -> list[tuple[Any, dict[int, tuple[Any, Any, Any
         for code, coordinates in ((_AXIS_U, trace.u_p), (_AXIS_V, trace.v_p)):
             if code not in lasts:
                 continue
-            last = lasts[code]
             c = dr.gather(mi.Float, coordinates, tap)
             if projector.supersampling > 1:
                 c = projector.table_coordinate(c)
-            if read == Lookup.nearest:
-                index = mi.UInt32(dr.clip(dr.floor(c + 0.5), 0.0, last))
-                positions[code] = (index, index, None)
-            else:
-                x = dr.clip(c, 0.0, last)
-                left = dr.minimum(dr.floor(x), dr.maximum(last - 1.0, 0.0))
-                right = dr.minimum(left + 1.0, last)
-                positions[code] = (mi.UInt32(left), mi.UInt32(right), x - left)
+            positions[code] = _table_position(mi, dr, c, lasts[code], read)
         out.append((dr.gather(mi.Float, pose.weight, tap), positions))
     return out
 
@@ -209,13 +224,12 @@ def _frame_radiance(mi: Any, dr: Any, table: Any, taps: list, code: Any) -> Any:
         v = positions.get(_AXIS_V, positions[_AXIS_NONE])
         left = dr.select(on_u, u[0], dr.select(on_v, v[0], 0))
         if u[2] is None:  # nearest
-            value = dr.gather(mi.Float, table, start + left)
+            position = (left, left, None)
         else:
             right = dr.select(on_u, u[1], dr.select(on_v, v[1], 0))
             fraction = dr.select(on_u, u[2], dr.select(on_v, v[2], 0.0))
-            value = dr.gather(mi.Float, table, start + left) * (1.0 - fraction)
-            value += dr.gather(mi.Float, table, start + right) * fraction
-        radiance += weight * value
+            position = (left, right, fraction)
+        radiance += weight * _read_table(mi, dr, table, start, position)
     return radiance
 
 
@@ -265,16 +279,7 @@ def _lane_radiance(pose: _Pose, frame: Any, pixel: Any) -> Any:
                 c += dr.gather(mi.Float, coordinates, tap, active)
         if projector.supersampling > 1:
             c = projector.table_coordinate(c)
-        if read == Lookup.nearest:
-            index = mi.UInt32(dr.clip(dr.floor(c + 0.5), 0.0, last))
-            value = dr.gather(mi.Float, pose.table, start + index)
-        else:
-            x = dr.clip(c, 0.0, last)
-            left = dr.minimum(dr.floor(x), dr.maximum(last - 1.0, 0.0))
-            right = dr.minimum(left + 1.0, last)
-            fraction = x - left
-            value = dr.gather(mi.Float, pose.table, start + mi.UInt32(left)) * (1.0 - fraction)
-            value += dr.gather(mi.Float, pose.table, start + mi.UInt32(right)) * fraction
+        value = _read_table(mi, dr, pose.table, start, _table_position(mi, dr, c, last, read))
         radiance += dr.gather(mi.Float, pose.weight, tap) * value
     return radiance
 
