@@ -32,6 +32,7 @@ from virtus.scene.model import (
     Scene,
     SphereObject,
     TexturedPlaneObject,
+    unchangeable_image,
 )
 
 #: Textures made from in-memory images, most recent last: ``(variant, image, copy,
@@ -42,24 +43,18 @@ _TEXTURES: list[tuple[str, np.ndarray, np.ndarray | None, Any]] = []
 _TEXTURE_CACHE_SIZE = 2
 
 
-def _unchangeable(image: np.ndarray) -> bool:
-    """A read-only array that owns its data (as :class:`virtus.scene.model` keeps images):
-    nothing can change it while it stays read-only."""
-    return not image.flags.writeable and image.flags.owndata
-
-
 def _texture(mi: ModuleType, image: np.ndarray) -> Any:
     """The Mitsuba texture of an albedo image, reused while the same unchanged image
-    comes back: the same array object, still read-only (see :func:`_unchangeable`), or
-    with contents equal to the copy kept here (comparing a 2000 x 2000 image took 4-5 ms
-    a pose on 2 CPU cores)."""
+    comes back: the same array object, still unchangeable
+    (:func:`~virtus.scene.model.unchangeable_image`), or with contents equal to the copy kept
+    here (comparing a 2000 x 2000 image took 4-5 ms a pose on 2 CPU cores)."""
     variant = mi.variant()
     for entry in _TEXTURES:
         if entry[0] != variant or entry[1] is not image:
             continue
         # An entry kept without a copy was made while the image could not change.
         copy = entry[2]
-        if copy is None if _unchangeable(image) else np.array_equal(copy, image):
+        if copy is None if unchangeable_image(image) else np.array_equal(copy, image):
             return entry[3]
     # raw: the values are linear albedos; clamp: no wrap-around at the board's edges.
     bitmap = mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32)[..., None])
@@ -72,7 +67,7 @@ def _texture(mi: ModuleType, image: np.ndarray) -> Any:
             "wrap_mode": "clamp",
         }
     )
-    copy = None if _unchangeable(image) else np.array(image)
+    copy = None if unchangeable_image(image) else np.array(image)
     _TEXTURES.append((variant, image, copy, texture))
     del _TEXTURES[:-_TEXTURE_CACHE_SIZE]
     return texture

@@ -119,6 +119,7 @@ __all__ = [
     "default_scene",
     "load_scene",
     "load_texture",
+    "unchangeable_image",
 ]
 
 
@@ -237,14 +238,18 @@ def _as_vector(name: str, value: Any, length: int, *, positive_entries: bool) ->
     return tuple(float(x) for x in array)
 
 
+def unchangeable_image(value: Any) -> bool:
+    """True for a read-only array that owns its data: nothing can change it while it stays
+    read-only (a view could change through its base; a writeable array through itself).
+    Images kept so are shared by the scenes built from them and by the renderer's caches."""
+    return isinstance(value, np.ndarray) and not value.flags.writeable and value.flags.owndata
+
+
 def _as_unit_image(name: str, value: Any) -> np.ndarray:
     """A (H, W) float64 array in [0, 1], read-only: a copy, unless ``value`` already is a
-    read-only float64 array owning its data (nothing can change it then), so scenes built
-    from one image share it (and the renderer's texture made from it)."""
-    reusable = (
-        isinstance(value, np.ndarray) and value.dtype == np.float64
-        and not value.flags.writeable and value.flags.owndata
-    )  # fmt: skip
+    float64 :func:`unchangeable_image`, so scenes built from one image share it (and the
+    renderer's texture made from it)."""
+    reusable = unchangeable_image(value) and value.dtype == np.float64
     try:
         array = value if reusable else np.array(value, dtype=np.float64)
     except (TypeError, ValueError, OverflowError):  # a mapping, ragged rows, text
