@@ -37,12 +37,14 @@ masks are bit-identical (tests/render/jit/test_synthesis.py checks it on LLVM).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from virtus.errors import InputError
+from virtus.render.backend import mitsuba
 from virtus.render.jit.noise import frame_keys, pixel_patterns, standard_normal_jit
 from virtus.render.jit.tracing import DeviceFrames, DeviceTrace
 from virtus.render.synthesis import as_projector, emitted_profiles, projector_groups, tap_weights
@@ -70,7 +72,7 @@ def layout_for(variant: str) -> str:
 
 
 def _profile_table(
-    trace: DeviceTrace, sequence: Any, projector: ProjectorModel
+    sequence: Any, projector: ProjectorModel, projector_width: int, projector_height: int
 ) -> tuple[np.ndarray, np.ndarray, dict[int, int]]:
     """Every frame's emitted light in one flat float32 table: ``(table, code, lengths)``,
     ``code`` (F,) uint32 per frame ``start << _KIND_BITS | kind`` (its row's start in the
@@ -79,7 +81,7 @@ def _profile_table(
     n_frames = len(sequence.frames)
     rows: list[np.ndarray] = [np.zeros(0, np.float32)] * n_frames
     kind = np.full(n_frames, _AXIS_NONE, dtype=np.uint32)
-    sizes = {"v": trace.projector_width, "h": trace.projector_height}
+    sizes = {"v": projector_width, "h": projector_height}
     lengths = {_AXIS_NONE: 1}
     for direction, code in (("v", _AXIS_U), ("h", _AXIS_V)):
         if groups[direction]:
@@ -98,6 +100,36 @@ def _profile_table(
         raise InputError("sequence", "fewer frames x projector pixels", f"{table.size} entries")
     start = np.concatenate([[0], np.cumsum([row.size for row in rows])[:-1]]).astype(np.uint32)
     return table, start << _KIND_BITS | kind, lengths
+
+
+def _device_table(
+    trace: DeviceTrace, sequence: Any, projector: ProjectorModel
+) -> tuple[Any, Any, dict[int, int]]:
+    """:func:`_profile_table` on the trace's device: ``(Float table, UInt32 code, lengths)``,
+    made once per sequence, projector and variant while they stay in :func:`_table_cache`
+    (the poses of a dataset or a calibration share them: made per pose, the table was about
+    half of a warm pose's host time). A sequence that cannot be hashed (a frame holding an
+    array) is made again each time."""
+    key = (trace.variant, sequence, projector, trace.projector_width, trace.projector_height)
+    try:
+        hash(key)
+    except TypeError:
+        return _upload_table(*key)
+    return _table_cache(*key)
+
+
+def _upload_table(
+    variant: str, sequence: Any, projector: ProjectorModel, width: int, height: int
+) -> tuple[Any, Any, dict[int, int]]:
+    mi, dr, _ = mitsuba(variant)
+    table, code, lengths = _profile_table(sequence, projector, width, height)
+    table, code = mi.Float(table), mi.UInt32(code)
+    dr.eval(table, code)
+    return table, code, lengths
+
+
+#: The tables of the last few (variant, sequence, projector, projector size) keys.
+_table_cache = functools.lru_cache(maxsize=8)(_upload_table)
 
 
 @dataclass
@@ -340,14 +372,14 @@ def synthesize_on_device(
     n_frames, n_pixels = len(sequence.frames), trace.n_pixels
     if n_frames * n_pixels >= 1 << 32:  # the frames' UInt32 indices; before any allocation
         raise InputError("sequence", f"fewer than {(1 << 32) // n_pixels} frames", n_frames)
-    table, code, lengths = _profile_table(trace, sequence, projector)
+    table, code, lengths = _device_table(trace, sequence, projector)
     weight = tap_weights(trace, projector, projector_intrinsics)
     dr.eval(weight)
     noisy = sensor.noisy
     prnu, dsnu = pixel_patterns(trace.variant, sensor, n_pixels) if noisy else (None, None)
     pose = _Pose(
         mi=mi, dr=dr, trace=trace, projector=projector, sensor=sensor, n_frames=n_frames,
-        weight=weight, table=mi.Float(table), code=mi.UInt32(code), lengths=lengths,
+        weight=weight, table=table, code=code, lengths=lengths,
         keys=frame_keys(mi, seed, np.arange(n_frames)) if noisy else None,
         prnu=prnu, dsnu=dsnu, gain=dr.opaque(mi.Float, float(exposure)), out=None,
         saturated=dr.full(mi.Bool, False, n_pixels),
