@@ -428,27 +428,27 @@ def percentile_of_positive(values: Any, q: float) -> float | None:
 
     Positive float32 values sort like their bit patterns, so two histogram passes over the
     bits (high 16, then low 16 within the bucket that holds the rank) find the exact
-    order statistics numpy's linear interpolation uses; only two 256 KiB histograms
-    reach the host. Returns None when no value is positive.
+    order statistics numpy's linear interpolation uses; each histogram's running sum is made
+    on the device and only it (256 KiB) reaches the host. Returns None when no value is
+    positive.
     """
     mi, dr = _modules_of(values)
     bits = dr.reinterpret_array(mi.UInt32, values)
     positive = values > 0
     high = bits >> 16
-    counts = _histogram(mi, dr, high, positive)
-    total = int(counts.sum())
+    cumulative = _cumulative_histogram(mi, dr, high, positive)
+    total = int(cumulative[-1])
     if total == 0:
         return None
     position = (total - 1) * q / 100.0
     ranks = sorted({int(np.floor(position)), min(int(np.floor(position)) + 1, total - 1)})
     found = {}
-    cumulative = np.cumsum(counts)
     buckets = {rank: int(np.searchsorted(cumulative, rank, side="right")) for rank in ranks}
     for bucket in sorted(set(buckets.values())):  # usually both ranks share one bucket
         before = int(cumulative[bucket - 1]) if bucket else 0
         # The bucket is opaque: one compiled kernel for every pose's bucket.
         inside = positive & (high == dr.opaque(mi.UInt32, bucket))
-        low = np.cumsum(_histogram(mi, dr, bits & 0xFFFF, inside))
+        low = _cumulative_histogram(mi, dr, bits & 0xFFFF, inside)
         for rank in (r for r, b in buckets.items() if b == bucket):
             index = int(np.searchsorted(low, rank - before, side="right"))
             found[rank] = np.array([(bucket << 16) | index], dtype=np.uint32).view(np.float32)[0]
@@ -456,11 +456,12 @@ def percentile_of_positive(values: Any, q: float) -> float | None:
     return float(np.percentile(pair, 100.0 * (position - np.floor(position))))
 
 
-def _histogram(mi: Any, dr: Any, keys: Any, active: Any) -> np.ndarray:
-    """(65536,) int64 counts of UInt32 ``keys`` < 65536 where ``active``."""
+def _cumulative_histogram(mi: Any, dr: Any, keys: Any, active: Any) -> np.ndarray:
+    """(65536,) uint32 running counts (inclusive) of UInt32 ``keys`` < 65536 where
+    ``active``: entry ``k`` counts the keys <= ``k``."""
     counts = dr.zeros(mi.UInt32, 1 << 16)
     dr.scatter_reduce(dr.ReduceOp.Add, counts, mi.UInt32(1), keys, active)
-    return np.asarray(counts.numpy(), dtype=np.int64)
+    return np.asarray(dr.cumsum(counts).numpy(), dtype=np.uint32)
 
 
 def _modules_of(array: Any) -> tuple[Any, Any]:
