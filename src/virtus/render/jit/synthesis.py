@@ -24,15 +24,20 @@ Two kernel layouts compute these same bits (:func:`layout_for` picks one by back
 * :data:`LAYOUT_FRAME_PIXEL` (CUDA, the GPU): a lane per (frame, pixel), ``F`` (52 for the
   default sequence) times as many lanes, each reading its taps -- 677de4a's kernel, its
   saturation mask now a masked scatter of ``True`` by every saturated lane in the same
-  launch (every writer of a pixel writes the same value). A GPU wants those lanes: on an
-  NVIDIA H200 (``cuda_ad_rgb``, ``benchmarks/bench_profile.py --variant cuda_ad_rgb --repeats
-  20 --poses 4 --mitsuba 16 --no-host --agreement --rounds 3``, 677de4a alternated with the
-  per-pixel loop in one run) the loop took 2.7-4.6 ms for synthesis + sensor against
-  2.6 ms, and the pose's device render 5.7-7.9 ms against 5.7-6.0 ms (6,581-9,074 against
-  8,667-9,140 frames/s).
+  launch (every writer of a pixel writes the same value). On the GPU the layout hardly
+  matters: on an NVIDIA H200 this kernel runs 0.33 ms for a 960 px pose (Dr.Jit's kernel
+  history), and a lane per (block of 2-26 frames, pixel) looping over its block, or the
+  CPU's lane per pixel, gave the same 3.6-4.0 ms of synthesis wall time (3 alternated
+  rounds) -- which was the host's: rebuilding the sequence's table every pose. That table is
+  now made once per sequence and projector (:func:`_device_table`), and a warm pose's
+  synthesis + sensor takes 0.4-0.6 ms on an H100 or H200.
 
 Both layouts do the same float32 operations in the same order per value, so their frames and
-masks are bit-identical (tests/render/jit/test_synthesis.py checks it on LLVM).
+masks are bit-identical on LLVM (tests/render/jit/test_synthesis.py checks it). On CUDA they
+were not (the H200 run above: frames of the per-pixel loop differed from the lane per
+frame's; by how much, and whether the PTX compiler fuses the two kernels' arithmetic
+differently, was not looked into): CUDA only ever uses :data:`LAYOUT_FRAME_PIXEL`, whose
+agreement with the CPU is measured by ``benchmarks/bench_profile.py --agreement``.
 """
 
 from __future__ import annotations
