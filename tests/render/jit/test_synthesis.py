@@ -163,6 +163,35 @@ def test_a_pose_split_over_several_kernels_gives_the_same_bits(
     assert whole.saturated_mask().any()
 
 
+def test_a_sequence_table_is_made_once_per_sequence_and_projector(device_trace, monkeypatch) -> None:
+    # The poses of a dataset share the sequence's table: made once for a sequence and
+    # projector (an equal sequence made anew included), again for another projector or
+    # sequence -- whose frames are theirs, not the cached ones.
+    made: list = []
+    profile_table = synthesis_jit._profile_table
+    monkeypatch.setattr(
+        synthesis_jit, "_profile_table", lambda *a: (made.append(a), profile_table(*a))[1]
+    )
+    synthesis_jit._table_cache.cache_clear()
+    sensor = SENSOR_PRESETS["ideal"]
+
+    def frames(sequence, projector="nearest"):  # noqa: ANN001, ANN202
+        return synthesize_on_device(device_trace, sequence, projector, sensor, 900.0).numpy()
+
+    first = frames(default_sequence())
+    np.testing.assert_array_equal(frames(default_sequence()), first)
+    assert len(made) == 1
+    gamma = frames(default_sequence(), ProjectorModel(gamma=2.2))
+    other = build_sequence(912, 1140, steps=5, gray_bits=6, complementary=False)
+    shifted = frames(other)
+    assert len(made) == 3
+    assert not np.array_equal(gamma, first)
+    assert shifted.shape[0] == len(other) != first.shape[0]
+    synthesis_jit._table_cache.cache_clear()  # made afresh: the same frames
+    np.testing.assert_array_equal(frames(default_sequence(), ProjectorModel(gamma=2.2)), gamma)
+    np.testing.assert_array_equal(frames(other), shifted)
+
+
 def test_the_layout_follows_the_backend(device_trace, monkeypatch) -> None:
     # A lane per pixel on LLVM (the CPU), a lane per frame and pixel on CUDA (the GPU); an
     # unknown layout is refused before any work.

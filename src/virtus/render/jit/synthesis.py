@@ -49,6 +49,7 @@ from typing import Any
 import numpy as np
 
 from virtus.errors import InputError
+from virtus.patterns.sequence import PatternSequence
 from virtus.render.backend import mitsuba
 from virtus.render.jit.noise import frame_keys, pixel_patterns, standard_normal_jit
 from virtus.render.jit.tracing import DeviceFrames, DeviceTrace
@@ -110,22 +111,22 @@ def _profile_table(
 def _device_table(
     trace: DeviceTrace, sequence: Any, projector: ProjectorModel
 ) -> tuple[Any, Any, dict[int, int]]:
-    """:func:`_profile_table` on the trace's device: ``(Float table, UInt32 code, lengths)``,
-    made once per sequence, projector and variant while they stay in :func:`_table_cache`
-    (the poses of a dataset or a calibration share them: made per pose, the table was about
-    half of a warm pose's host time). A sequence that cannot be hashed (a frame holding an
-    array) is made again each time."""
+    """:func:`_profile_table` on the trace's device: ``(Float table, UInt32 code, lengths)``.
+    Made once per (variant, sequence, projector, projector size) while it stays in
+    :func:`_table_cache` -- the poses of a dataset or a calibration share it; made per pose,
+    it was most of a warm GPU pose's synthesis time. Only a :class:`PatternSequence` (frozen,
+    compared by value) is cached: any other object with ``frames`` and ``profile`` may
+    change between calls, so its table is made each time."""
     key = (trace.variant, sequence, projector, trace.projector_width, trace.projector_height)
-    try:
-        hash(key)
-    except TypeError:
-        return _upload_table(*key)
-    return _table_cache(*key)
+    if isinstance(sequence, PatternSequence):
+        return _table_cache(*key)
+    return _upload_table(*key)
 
 
 def _upload_table(
     variant: str, sequence: Any, projector: ProjectorModel, width: int, height: int
 ) -> tuple[Any, Any, dict[int, int]]:
+    """:func:`_profile_table` uploaded to ``variant``'s device (evaluated)."""
     mi, dr, _ = mitsuba(variant)
     table, code, lengths = _profile_table(sequence, projector, width, height)
     table, code = mi.Float(table), mi.UInt32(code)
