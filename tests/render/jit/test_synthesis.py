@@ -163,7 +163,9 @@ def test_a_pose_split_over_several_kernels_gives_the_same_bits(
     assert whole.saturated_mask().any()
 
 
-def test_a_sequence_table_is_made_once_per_sequence_and_projector(device_trace, monkeypatch) -> None:
+def test_a_sequence_table_is_made_once_per_sequence_and_projector(
+    device_trace, monkeypatch
+) -> None:
     # The poses of a dataset share the sequence's table: made once for a sequence and
     # projector (an equal sequence made anew included), again for another projector or
     # sequence -- whose frames are theirs, not the cached ones.
