@@ -24,7 +24,8 @@ before a plane) with :func:`virtus.data.generate`, once per ``--workers`` value 
   the GPU layout (:mod:`virtus.data.chunkcodecs`: pieces of 64 KiB, 256 KiB, 1 MiB, one
   zstd frame each) by the numcodecs twin on one thread and, where nvCOMP and a GPU are
   here, by nvCOMP (every piece of the sample in one batch, copies to and from the device
-  included);
+  included), and every algorithm of nvCOMP on the same sample (:func:`nvcomp_rows`: speed,
+  size, and whether plain Zarr could read it);
 * with ``--compress-on cpu gpu`` (codec ``zstd`` or ``shuffle-zstd``): the same store made
   once per setting, side by side -- images/s, CPU seconds a sample and its split
   (render, labels, checksum, compression, io), compressed MB a sample, who encoded, and
@@ -222,6 +223,71 @@ def frames_rows(sample: dict, repeats: int = 3) -> list[dict]:
                         "bytes_per_sample": size, "ratio": round(raw / size, 2),
                     }
                 )  # fmt: skip
+    return rows
+
+
+#: nvCOMP's algorithms surveyed by :func:`nvcomp_rows`, and what a CPU reader needs for
+#: their RAW output: Zstd frames are read by plain Zarr (the ``zstd`` codec); LZ4 blocks
+#: could be wrapped into Blosc frames; Deflate would need a gzip/zlib wrapper with a CRC;
+#: the others are nvCOMP's own formats.
+NVCOMP_ALGORITHMS = {
+    "Zstd": "plain zarr (zstd)", "LZ4": "as blosc-lz4 blocks", "Snappy": "no",
+    "Deflate": "with a wrapper", "GDeflate": "no", "Bitcomp": "no", "ANS": "no",
+    "Cascaded": "no",
+}  # fmt: skip
+
+
+def nvcomp_rows(sample: dict, repeats: int = 3) -> list[dict]:
+    """Every nvCOMP algorithm of :data:`NVCOMP_ALGORITHMS` on one sample's arrays (each
+    byte-shuffled by its element size, as ``shuffle-zstd`` stages them, and cut into pieces
+    of 64 KiB, 256 KiB or 1 MiB, all pieces in one batch on the device): encode and copy
+    back seconds (the best of ``repeats`` after a warm-up; the upload is not timed), bytes,
+    ratio, and whether plain Zarr could read the result. Empty without nvCOMP or a GPU."""
+    from virtus.data.chunkcodecs import import_nvcomp, shuffle_bytes
+    from virtus.errors import VirtusError
+
+    try:
+        nvcomp = import_nvcomp()
+    except VirtusError as error:
+        print(f"no nvCOMP survey: {error}", file=sys.stderr)
+        return []
+    raw = sum(a.nbytes for a in sample.values())
+    staged = [shuffle_bytes(a.reshape(-1).view("u1"), a.dtype.itemsize) for a in sample.values()]
+    buffer = np.concatenate(staged)
+    starts = np.cumsum([0] + [a.size for a in staged])[:-1]
+    rows = []
+    for piece in (1 << 16, 1 << 18, 1 << 20):
+        bounds = [
+            (int(start + a), min(piece, chunk.size - a))
+            for start, chunk in zip(starts, staged, strict=True)
+            for a in range(0, chunk.size, piece)
+        ]
+        try:
+            device = nvcomp.as_array(buffer).cuda()
+        except Exception as error:  # no usable CUDA device
+            print(f"no nvCOMP survey: {error}", file=sys.stderr)
+            return rows
+        batch = nvcomp.as_arrays(device, [o for o, _ in bounds], [n for _, n in bounds])
+        for algorithm, readable in NVCOMP_ALGORITHMS.items():
+            codec = nvcomp.Codec(
+                algorithm=algorithm, bitstream_kind=nvcomp.BitstreamKind.RAW,
+                uncomp_chunk_size=piece,
+            )  # fmt: skip
+            codec.encode(batch).cpu()  # warm-up
+            best, size = float("inf"), 0
+            for _ in range(repeats):
+                start = time.perf_counter()
+                encoded = codec.encode(batch).cpu()
+                best = min(best, time.perf_counter() - start)
+            size = sum(np.asarray(encoded[i]).nbytes for i in range(len(encoded)))
+            rows.append(
+                {
+                    "codec": f"nvCOMP {algorithm} {piece >> 10}K", "level": 0,
+                    "encoder": f"nvcomp {nvcomp.__version__}", "plain_zarr": readable,
+                    "seconds_per_sample": round(best, 4), "mb_per_s": round(raw / best / 1e6, 1),
+                    "bytes_per_sample": size, "ratio": round(raw / size, 2),
+                }
+            )  # fmt: skip
     return rows
 
 
@@ -515,7 +581,8 @@ def main() -> None:
             first = folder / f"store_w{args.workers[0]}"
         codecs = codec_table(DatasetStore.open(first)) if args.codecs else []
         if args.codecs:
-            codecs += frames_rows(DatasetStore.open(first).read_sample(0))
+            sample = DatasetStore.open(first).read_sample(0)
+            codecs += frames_rows(sample) + nvcomp_rows(sample)
     result = {
         "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
         f"{platform.system()}",
