@@ -80,9 +80,9 @@ H100 host, the same sample staged as ``shuffle-zstd`` stages it, all pieces in o
 encode and copy back (``benchmarks/bench_dataset.py --samples 1 --codecs``, nvCOMP 6.0,
 one run) gave 0.79-2.08 GB/s for Zstd (ratio 3.93-4.01), 0.66-1.98 for LZ4 (2.87), 0.66-1.75
 for Snappy, 0.40-1.04 for Deflate, 1.72-2.39 for Bitcomp (1.86) and 1.62-2.35 for Cascaded
-(1.59) -- the fastest with 64 KiB pieces, most with the fewest bytes per piece -- against
+(1.59) -- each fastest with the smallest pieces, 64 KiB -- against
 0.49-1.07 GB/s for one core's numcodecs (blosc-lz4 0.98, shuffle-zstd 0.64). A sample is
-133 MB: the GPU's encoder carries at most 15-18 samples (780-940 images) a second.
+133 MB: the GPU's encoder carries at most 15-18 samples (about 820-940 images) a second.
 """
 
 from __future__ import annotations
