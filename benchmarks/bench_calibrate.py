@@ -27,6 +27,10 @@ without the renderer beside it).
     PYTHONPATH=src python benchmarks/bench_calibrate.py [--board 7x13] [--repeat 3]
         [--parts-poses 3] [--observer-poses 18] [--skip-cli] [--json out.json]
 
+The library calls run with glibc's malloc as the ``virtus`` command sets it
+(:mod:`virtus.allocator`); ``--malloc default`` keeps glibc's defaults (with ``--skip-cli``:
+the command's own process always sets it).
+
 Not a test: numbers depend on the machine (quote them with its description).
 """
 
@@ -333,7 +337,16 @@ def main() -> None:
     parser.add_argument(
         "--observer-poses", type=int, default=18, help="poses of the observers' comparison"
     )
+    parser.add_argument(
+        "--malloc", choices=["virtus", "default"], default="virtus",
+        help="glibc's malloc as the virtus command sets it (virtus.allocator), or its "
+        "defaults, for this process's library calls (default: virtus)",
+    )  # fmt: skip
     args = parser.parse_args()
+    if args.malloc == "virtus":
+        from virtus.allocator import keep_freed_memory
+
+        keep_freed_memory()
     if not 1 <= args.repeat <= 20 or not 0 <= args.parts_poses <= 18:
         parser.error("--repeat must be in 1..20 and --parts-poses in 0..18")
     if not 0 <= args.observer_poses <= 18:

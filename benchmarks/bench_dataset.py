@@ -47,6 +47,9 @@ before a plane) with :func:`virtus.data.generate`, once per ``--workers`` value 
     PYTHONPATH=src python benchmarks/bench_dataset.py --codec shuffle-zstd --compress-on cpu gpu \
         --gpus 1 --workers-per-gpu 8 --samples 480 --shard 8 --codecs
 
+The process and its workers run with glibc's malloc as the ``virtus`` command sets it
+(:mod:`virtus.allocator`); ``--malloc default`` keeps glibc's defaults.
+
 Not a test: numbers depend on the machine and its load (quote them with the load average;
 on a shared machine compare old and new code back to back).
 """
@@ -547,7 +550,16 @@ def main() -> None:
         help="compare who compresses (codec zstd or shuffle-zstd), e.g. cpu gpu",
     )  # fmt: skip
     parser.add_argument("--json", type=Path, help="also write the numbers here")
+    parser.add_argument(
+        "--malloc", choices=["virtus", "default"], default="virtus",
+        help="glibc's malloc as the virtus command sets it (virtus.allocator), or its "
+        "defaults, here and in the workers (default: virtus)",
+    )  # fmt: skip
     args = parser.parse_args()
+    if args.malloc == "virtus":
+        from virtus.allocator import keep_freed_memory
+
+        keep_freed_memory()
     if args.compress_on and args.codec not in GPU_CODECS:
         parser.error(f"--compress-on compares codecs {' or '.join(GPU_CODECS)}, not {args.codec}")
     per_gpu = gpu_setup(parser, args) if args.gpus else None

@@ -29,7 +29,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "src" / "virtus"
 #: Floors from the bottom; a module may import its own floor and those below it. Keys are
 #: names relative to ``virtus`` (a package name covers its sub-modules).
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("__init__", "errors", "checks", "paper"),
+    ("__init__", "errors", "checks", "paper", "allocator"),
     ("io",),
     ("geometry",),
     ("patterns", "sensor", "scene"),

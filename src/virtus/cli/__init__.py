@@ -15,6 +15,7 @@ import warnings
 
 import typer
 
+from virtus.allocator import keep_freed_memory
 from virtus.errors import VirtusError
 
 app = typer.Typer(
@@ -129,6 +130,7 @@ def main(argv: list[str] | None = None) -> None:
     missing files (:class:`VirtusError`, ``OSError``; status 2).
     """
     warnings.showwarning = _show_warning
+    keep_freed_memory()  # numpy's temporaries reuse freed pages (virtus.allocator)
     try:
         status = app(args=argv, prog_name="virtus", standalone_mode=False)
     except typer.TyperException as error:
