@@ -243,9 +243,11 @@ NVCOMP_ALGORITHMS = {
 def nvcomp_rows(sample: dict, repeats: int = 3) -> list[dict]:
     """Every nvCOMP algorithm of :data:`NVCOMP_ALGORITHMS` on one sample's arrays (each
     byte-shuffled by its element size, as ``shuffle-zstd`` stages them, and cut into pieces
-    of 64 KiB, 256 KiB or 1 MiB, all pieces in one batch on the device): encode and copy
-    back seconds (the best of ``repeats`` after a warm-up; the upload is not timed), bytes,
-    ratio, and whether plain Zarr could read the result. Empty without nvCOMP or a GPU."""
+    of 64 KiB, 256 KiB or 1 MiB, all pieces in one batch on the device); then Zstd, LZ4 and
+    Bitcomp on 4 and 16 copies of the sample in one batch (64 KiB pieces: does a larger
+    batch go faster?). Per row: encode and copy back seconds a sample (the best of
+    ``repeats`` after a warm-up; the upload is not timed), bytes, ratio, and whether plain
+    Zarr could read the result. Empty without nvCOMP or a GPU."""
     from virtus.data.chunkcodecs import import_nvcomp, shuffle_bytes
     from virtus.errors import VirtusError
 
@@ -256,41 +258,46 @@ def nvcomp_rows(sample: dict, repeats: int = 3) -> list[dict]:
         return []
     raw = sum(a.nbytes for a in sample.values())
     staged = [shuffle_bytes(a.reshape(-1).view("u1"), a.dtype.itemsize) for a in sample.values()]
-    buffer = np.concatenate(staged)
+    one = np.concatenate(staged)
     starts = np.cumsum([0] + [a.size for a in staged])[:-1]
+    configs = [(1, piece, tuple(NVCOMP_ALGORITHMS)) for piece in (1 << 16, 1 << 18, 1 << 20)]
+    configs += [(copies, 1 << 16, ("Zstd", "LZ4", "Bitcomp")) for copies in (4, 16)]
     rows = []
-    for piece in (1 << 16, 1 << 18, 1 << 20):
+    for copies, piece, algorithms in configs:
         bounds = [
-            (int(start + a), min(piece, chunk.size - a))
+            (int(k * one.size + start + a), min(piece, chunk.size - a))
+            for k in range(copies)
             for start, chunk in zip(starts, staged, strict=True)
             for a in range(0, chunk.size, piece)
         ]
         try:
-            device = nvcomp.as_array(buffer).cuda()
+            device = nvcomp.as_array(np.tile(one, copies)).cuda()
         except Exception as error:  # no usable CUDA device
             print(f"no nvCOMP survey: {error}", file=sys.stderr)
             return rows
         batch = nvcomp.as_arrays(device, [o for o, _ in bounds], [n for _, n in bounds])
-        for algorithm, readable in NVCOMP_ALGORITHMS.items():
+        for algorithm in algorithms:
             codec = nvcomp.Codec(
                 algorithm=algorithm, bitstream_kind=nvcomp.BitstreamKind.RAW,
                 uncomp_chunk_size=piece,
             )  # fmt: skip
             codec.encode(batch).cpu()  # warm-up
-            best, size = float("inf"), 0
+            best = float("inf")
             for _ in range(repeats):
                 start = time.perf_counter()
                 encoded = codec.encode(batch).cpu()
-                best = min(best, time.perf_counter() - start)
-            size = sum(np.asarray(encoded[i]).nbytes for i in range(len(encoded)))
+                best = min(best, (time.perf_counter() - start) / copies)
+            size = sum(np.asarray(encoded[i]).nbytes for i in range(len(encoded))) // copies
+            label = f"nvCOMP {algorithm} {piece >> 10}K" + (f" x{copies}" if copies > 1 else "")
             rows.append(
                 {
-                    "codec": f"nvCOMP {algorithm} {piece >> 10}K", "level": 0,
-                    "encoder": f"nvcomp {nvcomp.__version__}", "plain_zarr": readable,
+                    "codec": label, "level": 0, "encoder": f"nvcomp {nvcomp.__version__}",
+                    "plain_zarr": NVCOMP_ALGORITHMS[algorithm],
                     "seconds_per_sample": round(best, 4), "mb_per_s": round(raw / best / 1e6, 1),
                     "bytes_per_sample": size, "ratio": round(raw / size, 2),
                 }
             )  # fmt: skip
+        del batch, device
     return rows
 
 
