@@ -28,8 +28,8 @@ without the renderer beside it).
         [--parts-poses 3] [--observer-poses 18] [--skip-cli] [--json out.json]
 
 The library calls run with glibc's malloc as the ``virtus`` command sets it
-(:mod:`virtus.allocator`); ``--malloc default`` keeps glibc's defaults (with ``--skip-cli``:
-the command's own process always sets it).
+(:mod:`virtus.allocator`); ``--malloc default`` keeps glibc's defaults for them (the timed
+``virtus calibrate`` process always sets it: pair ``--malloc default`` with ``--skip-cli``).
 
 Not a test: numbers depend on the machine (quote them with its description).
 """
