@@ -189,17 +189,37 @@ def sample_offsets(spp: int) -> np.ndarray:
     return np.stack([du.ravel(), dv.ravel()], axis=1)
 
 
+#: Byte alignment of each row of the ray arrays that kernels read in place. On LLVM, Dr.Jit
+#: maps a numpy array's memory (no copy) and compiles its loads as aligned only when the
+#: address is a multiple of the vector's size (128 bytes: 16 float64 lanes), so where numpy's
+#: allocator happened to put the rays decided the kernel's source: a new pose, whose rays
+#: were copied anew, could compile the kernel again (a test caught it in CI).
+_ROW_ALIGN = 128
+
+
+def _aligned_rows(values: np.ndarray) -> np.ndarray:
+    """A read-only copy of (R, N) ``values`` whose rows each start at a multiple of
+    :data:`_ROW_ALIGN` bytes."""
+    rows, n = values.shape
+    itemsize = values.dtype.itemsize
+    stride = -(-n * itemsize // _ROW_ALIGN) * _ROW_ALIGN
+    buffer = np.empty(rows * stride + _ROW_ALIGN, np.uint8)
+    offset = -buffer.ctypes.data % _ROW_ALIGN
+    out = np.ndarray((rows, n), values.dtype, buffer, offset, (stride, itemsize))
+    out[...] = values
+    out.setflags(write=False)
+    return out
+
+
 @functools.lru_cache(maxsize=2)
 def _camera_rays(intrinsics: Intrinsics, spp: int) -> tuple[np.ndarray, np.ndarray]:
     """Unit ray directions in the camera frame, cached (datasets render many poses with one
-    camera): centre rays (P, 3) float64, and supersample rays (3, P * spp) float32 (rows x,
-    y, z; pixel-major order)."""
+    camera): centre rays (3, P) float64, and supersample rays (3, P * spp) float32 (rows x,
+    y, z; pixel-major order), each row :data:`_ROW_ALIGN`-byte aligned."""
     grid = intrinsics.pixel_grid().reshape(-1, 2)
-    centre = intrinsics.unproject(grid)
+    centre = _aligned_rows(intrinsics.unproject(grid).T)
     pixels = (grid[:, None, :] + sample_offsets(spp)[None, :, :]).reshape(-1, 2)
-    samples = np.ascontiguousarray(intrinsics.unproject(pixels).T, dtype=np.float32)
-    for array in (centre, samples):
-        array.setflags(write=False)
+    samples = _aligned_rows(intrinsics.unproject(pixels).T.astype(np.float32))
     return centre, samples
 
 
@@ -671,9 +691,8 @@ def centre_truth(ps: Pass) -> GroundTruth:
     rig, tracer, projector = ps.rig, ps.tracer, ps.projector
     height, width, n_pixels = ps.height, ps.width, ps.n_pixels
     centre_dirs, _ = _camera_rays(ps.camera, ps.spp)
-    centre_t = np.ascontiguousarray(centre_dirs.T)
     parts = [
-        tracer.centre(centre_t[:, i : i + _RAYS_PER_CHUNK], rig.cam2proj)
+        tracer.centre(centre_dirs[:, i : i + _RAYS_PER_CHUNK], rig.cam2proj)
         for i in range(0, n_pixels, _RAYS_PER_CHUNK)
     ]
     c = _concatenate(parts)

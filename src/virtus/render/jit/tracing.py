@@ -113,7 +113,7 @@ def _device_centre_directions(variant: str, intrinsics: Intrinsics) -> tuple[Any
     uploaded once per camera."""
     mi, dr, _ = mitsuba(variant)
     centre, _ = _camera_rays(intrinsics, 1)
-    directions = tuple(mi.Float64(np.ascontiguousarray(centre[:, i])) for i in range(3))
+    directions = tuple(mi.Float64(centre[i]) for i in range(3))
     dr.eval(*directions)
     return directions  # type: ignore[return-value]
 
