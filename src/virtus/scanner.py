@@ -164,11 +164,11 @@ class Scanner:
         lies in front of the camera placed at ``cam2world``.
         """
         from virtus.render.backend import SUPPORTED_VARIANTS
+        from virtus.render.rays import sample_offsets
         from virtus.render.tracing import (
             DEFAULT_APERTURE_SAMPLES,
             MAX_APERTURE_SAMPLES,
             MAX_BOUNCES,
-            sample_offsets,
         )
 
         settings = self.render

@@ -20,8 +20,8 @@ from virtus.geometry.optics import Intrinsics, ThinLens
 from virtus.geometry.transforms import Pose
 from virtus.patterns import default_sequence
 from virtus.render import RenderSettings, render, synthesize, trace, tracing
+from virtus.render.rays import sample_offsets
 from virtus.render.reference import ReferenceRenderer
-from virtus.render.tracing import sample_offsets
 from virtus.scene.model import (
     AreaLight,
     EnvironmentLight,

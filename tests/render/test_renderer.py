@@ -15,7 +15,6 @@ from virtus.geometry.optics import Intrinsics
 from virtus.geometry.transforms import Pose
 from virtus.patterns import default_sequence
 from virtus.render import RenderSettings, render, synthesize, trace
-from virtus.render.tracing import sample_offsets
 from virtus.scene.model import (
     BoxObject,
     Material,
@@ -47,26 +46,6 @@ def interior(mask: np.ndarray) -> np.ndarray:
         for dc in range(3):
             out &= padded[dr : dr + mask.shape[0], dc : dc + mask.shape[1]]
     return out
-
-
-# --- sampling -----------------------------------------------------------------------------
-
-
-@pytest.mark.parametrize("spp", [1, 4, 9, 16])
-def test_sample_offsets_are_a_grid_centred_on_the_pixel(spp: int) -> None:
-    offsets = sample_offsets(spp)
-    side = int(np.sqrt(spp))
-    assert offsets.shape == (spp, 2)
-    np.testing.assert_allclose(offsets.mean(axis=0), 0.0, atol=tol.SAMPLE_OFFSET_MEAN_PX)
-    np.testing.assert_allclose(np.unique(offsets[:, 0]), (np.arange(side) + 0.5) / side - 0.5)
-    if spp == 4:
-        np.testing.assert_allclose(np.abs(offsets), 0.25)
-
-
-@pytest.mark.parametrize("spp", [0, 2, 3, 5, 8, 2.5])
-def test_spp_must_be_a_perfect_square(spp: object) -> None:
-    with pytest.raises(InputError, match="spp"):
-        sample_offsets(spp)
 
 
 # --- radiometry ---------------------------------------------------------------------------

@@ -98,25 +98,13 @@ def test_the_kernels_do_not_depend_on_where_the_rays_sit_in_memory() -> None:
     # must give the same kernels. Before the rays' rows were aligned, the pixel-centre rays
     # were copied for each pose and the host path's first kernel changed from pose to pose
     # now and then (seen in CI).
-    from virtus.render import tracing
+    from virtus.render.rays import camera_rays
 
     hashes = []
     for pose in POSES:
-        tracing._camera_rays.cache_clear()
+        camera_rays.cache_clear()
         hashes.append(kernel_hashes(host_pose(pose)))
     assert hashes[0] == hashes[1] == hashes[2]
-
-
-@pytest.mark.parametrize("dtype", [np.float32, np.float64])
-@pytest.mark.parametrize("n", [1, 7, 25_500])
-def test_aligned_rows_copy_the_values_with_every_row_aligned(dtype, n) -> None:  # noqa: ANN001
-    from virtus.render.tracing import _ROW_ALIGN, _aligned_rows
-
-    values = np.arange(3 * n, dtype=dtype).reshape(3, n)
-    rows = _aligned_rows(values)
-    np.testing.assert_array_equal(rows, values)
-    assert rows.dtype == dtype and not rows.flags.writeable
-    assert all(row.ctypes.data % _ROW_ALIGN == 0 for row in rows)
 
 
 def test_a_scene_with_another_ambient_level_reuses_the_kernels() -> None:

@@ -80,6 +80,7 @@ from virtus.geometry.optics import Intrinsics, ThinLens
 from virtus.geometry.transforms import Pose
 from virtus.render.backend import mitsuba, variant_of
 from virtus.render.mitsuba_scene import check_in_front, load_scene
+from virtus.render.rays import camera_rays, sample_offsets
 from virtus.scene.model import Scene
 
 #: Rays traced per Mitsuba call: bounds memory (~100 B per ray inside Dr.Jit).
@@ -173,54 +174,6 @@ def _by_vertex(weight: np.ndarray, bounces: int, aperture_samples: int) -> np.nd
     n_pixels = weight.shape[0]
     per_vertex = weight.reshape(n_pixels, -1, bounces, aperture_samples).sum(axis=(1, 3))
     return np.ascontiguousarray(per_vertex.T, dtype=np.float32)
-
-
-def sample_offsets(spp: int) -> np.ndarray:
-    """(spp, 2) float64 stratified sub-pixel offsets ``(du, dv)`` whose centroid is 0.
-
-    ``spp`` must be a perfect square s * s: an s x s grid at ``(i + 0.5) / s - 0.5`` px.
-    """
-    spp = positive_int("spp", spp)
-    side = math.isqrt(spp)
-    if side * side != spp:
-        raise InputError("spp", "a perfect square (1, 4, 9, 16, ...)", spp)
-    grid = (np.arange(side) + 0.5) / side - 0.5
-    dv, du = np.meshgrid(grid, grid, indexing="ij")
-    return np.stack([du.ravel(), dv.ravel()], axis=1)
-
-
-#: Byte alignment of each row of the ray arrays that kernels read in place. On LLVM, Dr.Jit
-#: maps a numpy array's memory (no copy) and compiles its loads as aligned only when the
-#: address is a multiple of the vector's size (128 bytes: 16 float64 lanes), so where numpy's
-#: allocator happened to put the rays decided the kernel's source: a new pose, whose rays
-#: were copied anew, could compile the kernel again (a test caught it in CI).
-_ROW_ALIGN = 128
-
-
-def _aligned_rows(values: np.ndarray) -> np.ndarray:
-    """A read-only copy of (R, N) ``values`` whose rows each start at a multiple of
-    :data:`_ROW_ALIGN` bytes."""
-    rows, n = values.shape
-    itemsize = values.dtype.itemsize
-    stride = -(-n * itemsize // _ROW_ALIGN) * _ROW_ALIGN
-    buffer = np.empty(rows * stride + _ROW_ALIGN, np.uint8)
-    offset = -buffer.ctypes.data % _ROW_ALIGN
-    out = np.ndarray((rows, n), values.dtype, buffer, offset, (stride, itemsize))
-    out[...] = values
-    out.setflags(write=False)
-    return out
-
-
-@functools.lru_cache(maxsize=2)
-def _camera_rays(intrinsics: Intrinsics, spp: int) -> tuple[np.ndarray, np.ndarray]:
-    """Unit ray directions in the camera frame, cached (datasets render many poses with one
-    camera): centre rays (3, P) float64, and supersample rays (3, P * spp) float32 (rows x,
-    y, z; pixel-major order), each row :data:`_ROW_ALIGN`-byte aligned."""
-    grid = intrinsics.pixel_grid().reshape(-1, 2)
-    centre = _aligned_rows(intrinsics.unproject(grid).T)
-    pixels = (grid[:, None, :] + sample_offsets(spp)[None, :, :]).reshape(-1, 2)
-    samples = _aligned_rows(intrinsics.unproject(pixels).T.astype(np.float32))
-    return centre, samples
 
 
 def _inside(u: np.ndarray, v: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:
@@ -690,7 +643,7 @@ def centre_truth(ps: Pass) -> GroundTruth:
     the taps)."""
     rig, tracer, projector = ps.rig, ps.tracer, ps.projector
     height, width, n_pixels = ps.height, ps.width, ps.n_pixels
-    centre_dirs, _ = _camera_rays(ps.camera, ps.spp)
+    centre_dirs, _ = camera_rays(ps.camera, ps.spp)
     parts = [
         tracer.centre(centre_dirs[:, i : i + _RAYS_PER_CHUNK], rig.cam2proj)
         for i in range(0, n_pixels, _RAYS_PER_CHUNK)
@@ -757,7 +710,7 @@ def trace(
     spp, bounces, aperture_samples = ps.spp, ps.bounces, ps.aperture_samples
     projector, tracer, variant_name = ps.projector, ps.tracer, ps.variant
     height, width, n_pixels, n_rays = ps.height, ps.width, ps.n_pixels, ps.n_rays
-    _, sample_dirs = _camera_rays(ps.camera, spp)
+    _, sample_dirs = camera_rays(ps.camera, spp)
     truth = centre_truth(ps)
 
     # ---- supersamples: taps of projector coordinates and white-projector radiance ----

@@ -31,10 +31,10 @@ from virtus.geometry.devices import Rig
 from virtus.geometry.optics import Intrinsics, ThinLens
 from virtus.geometry.transforms import Pose
 from virtus.render.backend import mitsuba, variant_of
+from virtus.render.rays import camera_rays
 from virtus.render.tracing import (
     Pass,
     Trace,
-    _camera_rays,
     _inside,
     prepare_pass,
     project_normalized,
@@ -112,7 +112,7 @@ def _device_centre_directions(variant: str, intrinsics: Intrinsics) -> tuple[Any
     """The pixel-centre ray directions (camera frame) as three device ``Float64`` arrays,
     uploaded once per camera."""
     mi, dr, _ = mitsuba(variant)
-    centre, _ = _camera_rays(intrinsics, 1)
+    centre, _ = camera_rays(intrinsics, 1)
     directions = tuple(mi.Float64(centre[i]) for i in range(3))
     dr.eval(*directions)
     return directions  # type: ignore[return-value]
@@ -334,7 +334,7 @@ def _device_directions(variant: str, intrinsics: Intrinsics, spp: int) -> Any:
     """The supersample ray directions (camera frame) as a device ``Vector3f``, uploaded
     once per camera (datasets and calibrations trace many poses with one camera)."""
     mi, dr, _ = mitsuba(variant)
-    _, samples = _camera_rays(intrinsics, spp)
+    _, samples = camera_rays(intrinsics, spp)
     directions = mi.Vector3f(samples[0], samples[1], samples[2])
     dr.eval(directions)
     return directions
