@@ -165,6 +165,12 @@ class _Pose:
         """The digital frames' Dr.Jit type."""
         return self.mi.UInt8 if self.sensor.bit_depth == 8 else self.mi.UInt32
 
+    @property
+    def read(self) -> Lookup:
+        """How the table is read: the pixel model's lookup (a ``psf`` table, already
+        spread, is read bilinearly)."""
+        return Lookup.bilinear if self.projector.pixel == Lookup.psf else self.projector.pixel
+
     def lasts(self) -> dict[int, Any]:
         """The last entry of each kind's rows: a projector's value, opaque so that no kernel
         bakes it in."""
@@ -196,6 +202,13 @@ class _Pose:
     def is_saturated(self, digital: Any) -> Any:
         """Bool per lane: ``digital`` at or above the sensor's saturation level."""
         return self.mi.UInt32(digital) >= self.mi.UInt32(self.sensor.saturation_dn)
+
+
+def _frame_kind(code: Any) -> tuple[Any, Any, Any]:
+    """A frame's ``code`` (UInt32 ``start << _KIND_BITS | kind``) read: its row's start in
+    the table, and whether its fringes vary along u (Bool) and along v (Bool)."""
+    start, kind = code >> _KIND_BITS, code & ((1 << _KIND_BITS) - 1)
+    return start, kind == _AXIS_U, kind == _AXIS_V
 
 
 def _table_position(mi: Any, dr: Any, c: Any, last: Any, read: Lookup) -> tuple[Any, Any, Any]:
@@ -230,8 +243,7 @@ def _tap_positions(pose: _Pose) -> list[tuple[Any, dict[int, tuple[Any, Any, Any
     uniform frame reads entry 0. Frame-independent, so computed once per pixel before the
     frame loop, with a per-frame lookup's arithmetic."""
     mi, dr, trace, projector = pose.mi, pose.dr, pose.trace, pose.projector
-    taps = trace.taps_per_pixel
-    read = Lookup.bilinear if projector.pixel == Lookup.psf else projector.pixel
+    taps, read = trace.taps_per_pixel, pose.read
     pixel = dr.arange(mi.UInt32, trace.n_pixels)
     lasts = pose.lasts()
     zero = dr.zeros(mi.UInt32, trace.n_pixels)
@@ -254,8 +266,7 @@ def _tap_positions(pose: _Pose) -> list[tuple[Any, dict[int, tuple[Any, Any, Any
 def _frame_radiance(mi: Any, dr: Any, table: Any, taps: list, code: Any) -> Any:
     """Float (P,): the sum over the taps of weight x the emitted light of the frame whose
     ``code`` (UInt32 ``start << _KIND_BITS | kind``) is given."""
-    start, kind = code >> _KIND_BITS, code & ((1 << _KIND_BITS) - 1)
-    on_u, on_v = kind == _AXIS_U, kind == _AXIS_V
+    start, on_u, on_v = _frame_kind(code)
     radiance = dr.zeros(mi.Float, dr.width(code))
     for weight, positions in taps:
         u = positions.get(_AXIS_U, positions[_AXIS_NONE])
@@ -300,11 +311,8 @@ def _lane_radiance(pose: _Pose, frame: Any, pixel: Any) -> Any:
     """Float per lane: the sum over pixel ``pixel``'s taps of weight x frame ``frame``'s
     emitted light, each lane reading only its frame's coordinate (masked gathers)."""
     mi, dr, trace, projector = pose.mi, pose.dr, pose.trace, pose.projector
-    taps = trace.taps_per_pixel
-    read = Lookup.bilinear if projector.pixel == Lookup.psf else projector.pixel
-    code = dr.gather(mi.UInt32, pose.code, frame)
-    start, kind = code >> _KIND_BITS, code & ((1 << _KIND_BITS) - 1)
-    on_u, on_v = kind == _AXIS_U, kind == _AXIS_V
+    taps, read = trace.taps_per_pixel, pose.read
+    start, on_u, on_v = _frame_kind(dr.gather(mi.UInt32, pose.code, frame))
     lasts = pose.lasts()
     last = dr.select(on_v, lasts.get(_AXIS_V, 0.0), 0.0)
     last = dr.select(on_u, lasts.get(_AXIS_U, 0.0), last)
