@@ -135,6 +135,23 @@ def apply_homography(H: np.ndarray, points: np.ndarray) -> np.ndarray:  # noqa: 
     return p[:, :2] / p[:, 2:3]
 
 
+def circle_pixel_bounds(
+    H: np.ndarray,  # noqa: N803
+    centres: np.ndarray,
+    radii: float | np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The lowest and highest camera pixels ``(u, v)`` ((N, 2) int each, floor and ceiling,
+    not clipped to any image) of the board circles of ``radii`` (m, one or (N,)) around
+    ``centres`` (N, 2) m, mapped by ``H`` (board -> camera px): 32 outline points each."""
+    ring = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+    circle = np.stack([np.cos(ring), np.sin(ring)], axis=1)
+    radii = np.broadcast_to(np.asarray(radii, dtype=np.float64), (len(centres),))
+    outline = centres[:, None, :] + radii[:, None, None] * circle[None]  # (N, 32, 2)
+    mapped = outline @ H[:2, :2].T + H[:2, 2]
+    mapped = mapped / (outline @ H[2, :2] + H[2, 2])[..., None]
+    return np.floor(mapped.min(axis=1)).astype(int), np.ceil(mapped.max(axis=1)).astype(int)
+
+
 def order_to_board(
     board: Board, centres: np.ndarray, image: np.ndarray | None = None
 ) -> np.ndarray | None:
@@ -399,13 +416,8 @@ def _centroids(
     circle (the same windows and rules; centroids equal to rounding, ~1e-10 px)."""
     obj = board.object_points[:, :2]
     r_in, r_out = _window_radii(board)
-    ring = np.linspace(0, 2 * np.pi, 32, endpoint=False)
-    circle = np.stack([np.cos(ring), np.sin(ring)], axis=1)
-    outline = obj[:, None, :] + r_out * circle[None]  # (N, 32, 2) board m
-    mapped = outline @ H[:2, :2].T + H[:2, 2]
-    mapped = mapped / (outline @ H[2, :2] + H[2, 2])[..., None]
-    lo = np.floor(mapped.min(axis=1)).astype(int) - 1
-    hi = np.ceil(mapped.max(axis=1)).astype(int) + 1
+    lo, hi = circle_pixel_bounds(H, obj, r_out)
+    lo, hi = lo - 1, hi + 1
     height, width = img.shape
     fits = (lo.min(axis=1) >= 0) & (hi[:, 0] < width) & (hi[:, 1] < height)
     out = np.full_like(centres, np.nan)

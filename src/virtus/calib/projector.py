@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from virtus.calib.board import CircleBoard
-from virtus.calib.detect import apply_homography, fit_homography
+from virtus.calib.detect import apply_homography, circle_pixel_bounds, fit_homography
 from virtus.checks import as_float_array, as_points, positive
 from virtus.errors import InputError
 
@@ -181,15 +181,9 @@ def _window_boxes(
     """(N, 2, 2) int pixel boxes ``[[u_lo, v_lo], [u_hi, v_hi]]`` (inclusive, clipped to the
     image; ``hi < lo`` when off it) of the windows: the board circles of ``radii`` (m)
     around ``centres`` (N, 2) m, mapped by ``H`` (board -> camera px)."""
-    ring = np.linspace(0, 2 * np.pi, 32, endpoint=False)
-    circle = np.stack([np.cos(ring), np.sin(ring)], axis=1)
-    outline = centres[:, None, :] + radii[:, None, None] * circle[None]  # (N, 32, 2)
-    p = outline @ H[:2, :2].T + H[:2, 2]
-    image = p / (outline @ H[2, :2] + H[2, 2])[..., None]
+    lo, hi = circle_pixel_bounds(H, centres, radii)
     height, width = shape
-    lo = np.maximum(np.floor(image.min(axis=1)).astype(int), 0)
-    hi = np.minimum(np.ceil(image.max(axis=1)).astype(int), (width - 1, height - 1))
-    return np.stack([lo, hi], axis=1)
+    return np.stack([np.maximum(lo, 0), np.minimum(hi, (width - 1, height - 1))], axis=1)
 
 
 def _gather_windows(
