@@ -188,10 +188,10 @@ def codec_table(store: DatasetStore) -> list[dict]:
 
 def frames_rows(sample: dict, repeats: int = 3) -> list[dict]:
     """``zstd`` and ``shuffle-zstd`` of one sample's arrays in the GPU layout (each chunk cut
-    into pieces of 64 KiB, 256 KiB -- the default,
-    :data:`virtus.data.chunkcodecs.PIECE_BYTES` -- or 1 MiB, one zstd frame each): by the
-    numcodecs twin on one CPU thread, and where nvCOMP and a GPU are here by nvCOMP (one
-    batch of every piece, host copies included). The best of ``repeats`` after a warm-up."""
+    into pieces of 64 KiB -- the default, :data:`virtus.data.chunkcodecs.PIECE_BYTES` --,
+    256 KiB or 1 MiB, one zstd frame each): by the numcodecs twin on one CPU thread, and
+    where nvCOMP and a GPU are here by nvCOMP (one batch of every piece, host copies
+    included). The best of ``repeats`` after a warm-up."""
     from virtus.data.chunkcodecs import CpuZstdFrames, NvcompZstdFrames
     from virtus.errors import VirtusError
 
@@ -243,12 +243,16 @@ NVCOMP_ALGORITHMS = {
 def nvcomp_rows(sample: dict, repeats: int = 3) -> list[dict]:
     """Every nvCOMP algorithm of :data:`NVCOMP_ALGORITHMS` on one sample's arrays (each
     byte-shuffled by its element size, as ``shuffle-zstd`` stages them, and cut into pieces
-    of 64 KiB, 256 KiB or 1 MiB, all pieces in one batch on the device); then Zstd, LZ4 and
-    Bitcomp on 4 and 16 copies of the sample in one batch (64 KiB pieces: does a larger
-    batch go faster?). Per row: encode and copy back seconds a sample (the best of
-    ``repeats`` after a warm-up; the upload is not timed), bytes, ratio, and whether plain
-    Zarr could read the result. Empty without nvCOMP or a GPU."""
+    of 32 KiB to 256 KiB, all pieces in one batch on the device); then Zstd and LZ4 on 4
+    copies of the sample in one batch. Per row, seconds a sample: the encode (frames written
+    into slots of one device buffer, waited for: the kernel), bringing the frames back as
+    :class:`~virtus.data.chunkcodecs.NvcompZstdFrames` does (one copy of the slots' buffer
+    into a kept page-locked host buffer, :mod:`virtus.data.hostcopy`) and as nvCOMP's
+    ``.cpu()`` does (each frame into new host memory); bytes, ratio, and whether plain Zarr
+    could read the result. The best of ``repeats`` after a warm-up (the upload is not
+    timed). Empty without nvCOMP or a GPU."""
     from virtus.data.chunkcodecs import import_nvcomp, shuffle_bytes
+    from virtus.data.hostcopy import host_copier
     from virtus.errors import VirtusError
 
     try:
@@ -260,8 +264,8 @@ def nvcomp_rows(sample: dict, repeats: int = 3) -> list[dict]:
     staged = [shuffle_bytes(a.reshape(-1).view("u1"), a.dtype.itemsize) for a in sample.values()]
     one = np.concatenate(staged)
     starts = np.cumsum([0] + [a.size for a in staged])[:-1]
-    configs = [(1, piece, tuple(NVCOMP_ALGORITHMS)) for piece in (1 << 16, 1 << 18, 1 << 20)]
-    configs += [(copies, 1 << 16, ("Zstd", "LZ4", "Bitcomp")) for copies in (4, 16)]
+    configs = [(1, piece, tuple(NVCOMP_ALGORITHMS)) for piece in (1 << 15, 1 << 16, 1 << 18)]
+    configs += [(4, piece, ("Zstd", "LZ4")) for piece in (1 << 16, 1 << 17)]
     rows = []
     for copies, piece, algorithms in configs:
         bounds = [
@@ -270,33 +274,57 @@ def nvcomp_rows(sample: dict, repeats: int = 3) -> list[dict]:
             for start, chunk in zip(starts, staged, strict=True)
             for a in range(0, chunk.size, piece)
         ]
+        lengths = [n for _, n in bounds]
         try:
             device = nvcomp.as_array(np.tile(one, copies)).cuda()
         except Exception as error:  # no usable CUDA device
             print(f"no nvCOMP survey: {error}", file=sys.stderr)
             return rows
-        batch = nvcomp.as_arrays(device, [o for o, _ in bounds], [n for _, n in bounds])
+        batch = nvcomp.as_arrays(device, [o for o, _ in bounds], lengths)
         for algorithm in algorithms:
             codec = nvcomp.Codec(
                 algorithm=algorithm, bitstream_kind=nvcomp.BitstreamKind.RAW,
                 uncomp_chunk_size=piece,
             )  # fmt: skip
-            codec.encode(batch).cpu()  # warm-up
-            best = float("inf")
-            for _ in range(repeats):
+            slot = -(-codec.get_max_comp_buffer_size(batch[0]) // 16) * 16
+            target = nvcomp.as_array(np.empty(slot * len(bounds), np.uint8)).cuda()
+            slots = nvcomp.as_arrays(target, [k * slot for k in range(len(bounds))],
+                                     [slot] * len(bounds))  # fmt: skip
+            config = codec.compression_config(lengths)
+            copier = None
+            times: dict[str, float] = {"kernel": np.inf, "copy": np.inf, "nvcomp_copy": np.inf}
+            for attempt in range(repeats + 1):  # the first is the warm-up
                 start = time.perf_counter()
-                encoded = codec.encode(batch).cpu()
-                best = min(best, (time.perf_counter() - start) / copies)
-            size = sum(np.asarray(encoded[i]).nbytes for i in range(len(encoded))) // copies
+                encoded = codec.encode(batch, out=slots, compression_config=config)
+                sizes = encoded.buffer_sizes  # waits for the kernel
+                middle = time.perf_counter()
+                copier = copier or host_copier()
+                if copier is not None:
+                    copier.copy(target, slot * (len(sizes) - 1) + sizes[-1])
+                end = time.perf_counter()
+                encoded.cpu()
+                last = time.perf_counter()
+                if attempt:
+                    times["kernel"] = min(times["kernel"], (middle - start) / copies)
+                    times["copy"] = min(times["copy"], (end - middle) / copies)
+                    times["nvcomp_copy"] = min(times["nvcomp_copy"], (last - end) / copies)
+            size = sum(sizes) // copies
             label = f"nvCOMP {algorithm} {piece >> 10}K" + (f" x{copies}" if copies > 1 else "")
             rows.append(
                 {
                     "codec": label, "level": 0, "encoder": f"nvcomp {nvcomp.__version__}",
                     "plain_zarr": NVCOMP_ALGORITHMS[algorithm],
-                    "seconds_per_sample": round(best, 4), "mb_per_s": round(raw / best / 1e6, 1),
+                    "kernel_s": round(times["kernel"], 4),
+                    "kernel_gb_per_s": round(raw / times["kernel"] / 1e9, 2),
+                    "copy_back_s": round(times["copy"], 4) if copier else None,
+                    "nvcomp_copy_back_s": round(times["nvcomp_copy"], 4),
+                    "seconds_per_sample": round(times["kernel"] + (times["copy"] if copier
+                                                                   else times["nvcomp_copy"]), 4),
                     "bytes_per_sample": size, "ratio": round(raw / size, 2),
                 }
             )  # fmt: skip
+            rows[-1]["mb_per_s"] = round(raw / rows[-1]["seconds_per_sample"] / 1e6, 1)
+            del slots, target
         del batch, device
     return rows
 
@@ -501,6 +529,12 @@ def summary(result: dict) -> str:
         lines.append(
             f"  codec {row['codec']:<10} level {row['level']}: {row['seconds_per_sample']:.3f} "
             f"s/sample ({row['mb_per_s']} MB/s), ratio {row['ratio']}"
+            + (
+                f" (kernel {row['kernel_s'] * 1e3:.1f} ms, {row['kernel_gb_per_s']} GB/s; copy "
+                f"back {row['copy_back_s']} s, nvCOMP's .cpu() {row['nvcomp_copy_back_s']} s)"
+                if "kernel_s" in row
+                else ""
+            )
         )
     return "\n".join(lines)
 

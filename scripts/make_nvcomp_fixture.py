@@ -11,7 +11,7 @@ It compresses a few small deterministic chunks (a stack of 22 fringe frames, uin
 float32 phase pair; an int32 order pair; a uint16 object-id map; the phase pair once more
 without the byte shuffle) with :class:`virtus.data.chunkcodecs.NvcompZstdFrames`, in pieces
 of 4 KiB (so each chunk is several zstd frames, as a 960 x 960 sample's are with the default
-256 KiB), checks on the spot that numcodecs decodes every one to the original bytes, and
+64 KiB), checks on the spot that numcodecs decodes every one to the original bytes, and
 writes ``<case>.npy`` (the array), ``<case>.zst`` (nvCOMP's stored bytes of the chunk) and
 ``meta.json`` (the encoder, the piece size, whether a second encode gave the same bytes,
 each case's element size for the shuffle and its sizes). About 90 kB in all; a few

@@ -178,9 +178,10 @@ def test_frames_without_a_content_size_decode_too() -> None:
 
 class _FakeNvcomp:
     """Just the part of nvCOMP's Python API that :class:`NvcompZstdFrames` uses (as_array,
-    .cuda(), as_arrays carved by offsets, Codec(Zstd, RAW).encode(batch).cpu(), indexing),
-    on the host with numcodecs' zstd: the flow around nvCOMP -- staging, carving, frames,
-    regrouping -- runs in CI; nvCOMP's own bytes are the fixture's test."""
+    .cuda(), as_arrays carved by offsets, Codec(Zstd, RAW) with its bound, configuration and
+    encode into given slots, the frames' sizes, .cpu(), indexing), on the host with
+    numcodecs' zstd: the flow around nvCOMP -- staging, carving, slots, frames, regrouping
+    -- runs in CI; nvCOMP's own bytes are the fixture's test."""
 
     __version__ = "0.0-fake"
 
@@ -188,8 +189,8 @@ class _FakeNvcomp:
         RAW = "RAW"
 
     class Array:
-        def __init__(self, data) -> None:
-            self.data = np.array(data, dtype=np.uint8, copy=True)  # device memory: a copy
+        def __init__(self, data, copy=True) -> None:  # device memory: a copy
+            self.data = np.array(data, dtype=np.uint8, copy=True) if copy else data
 
         def cuda(self):
             return _FakeNvcomp.Array(self.data)
@@ -207,20 +208,36 @@ class _FakeNvcomp:
         def __getitem__(self, index):
             return self.arrays[index]
 
+        @property
+        def buffer_sizes(self) -> list[int]:
+            return [a.data.size for a in self.arrays]
+
         def cpu(self):
-            return self
+            return _FakeNvcomp.Batch([_FakeNvcomp.Array(a.data) for a in self.arrays])
 
     class Codec:
         def __init__(self, algorithm, bitstream_kind, uncomp_chunk_size) -> None:
             assert (algorithm, bitstream_kind) == ("Zstd", "RAW")
             self.largest = uncomp_chunk_size
 
-        def encode(self, batch):
+        def get_max_comp_buffer_size(self, array) -> int:
+            return array.data.size + 64  # more than zstd's bound for these sizes
+
+        def compression_config(self, sizes):
+            assert all(0 < n <= self.largest for n in sizes)
+            return tuple(sizes)
+
+        def encode(self, batch, out, compression_config):
             from numcodecs import Zstd
 
-            assert all(a.data.size <= self.largest for a in batch.arrays)
-            frames = [np.frombuffer(Zstd(level=1).encode(a.data), np.uint8) for a in batch.arrays]
-            return _FakeNvcomp.Batch([_FakeNvcomp.Array(f) for f in frames])
+            assert compression_config == tuple(a.data.size for a in batch.arrays)
+            frames = [Zstd(level=1).encode(a.data) for a in batch.arrays]
+            written = []
+            for frame, slot in zip(frames, out.arrays, strict=True):
+                assert len(frame) <= slot.data.size
+                slot.data[: len(frame)] = np.frombuffer(frame, np.uint8)
+                written.append(_FakeNvcomp.Array(slot.data[: len(frame)], copy=False))
+            return _FakeNvcomp.Batch(written)
 
     @staticmethod
     def as_array(source):
@@ -230,40 +247,79 @@ class _FakeNvcomp:
     def as_arrays(buffer, offsets, sizes):
         data = np.asarray(buffer)
         return _FakeNvcomp.Batch(
-            [_FakeNvcomp.Array(data[o : o + n]) for o, n in zip(offsets, sizes, strict=True)]
+            [
+                _FakeNvcomp.Array(data[o : o + n], copy=False)
+                for o, n in zip(offsets, sizes, strict=True)
+            ]
         )
+
+
+class _FakeCopier:
+    """:class:`virtus.data.hostcopy.HostCopier` for :class:`_FakeNvcomp`'s "device" arrays:
+    copies into one kept buffer, overwritten by each copy."""
+
+    def __init__(self) -> None:
+        self.kept = np.empty(0, np.uint8)
+        self.copies = 0
+
+    def copy(self, source, nbytes: int) -> np.ndarray:
+        if self.kept.size < nbytes:
+            self.kept = np.empty(nbytes, np.uint8)
+        self.kept[:nbytes] = np.asarray(source)[:nbytes]
+        self.copies += 1
+        return self.kept[:nbytes]
 
 
 @pytest.fixture
 def fake_nvcomp(monkeypatch):
-    """``from nvidia import nvcomp`` gives :class:`_FakeNvcomp`."""
+    """``from nvidia import nvcomp`` gives :class:`_FakeNvcomp`; no CUDA driver copies."""
     import types
 
     monkeypatch.delenv(codecs.FAKE_NVCOMP_ENV, raising=False)
     monkeypatch.setitem(sys.modules, "nvidia", types.SimpleNamespace(nvcomp=_FakeNvcomp))
     monkeypatch.setitem(sys.modules, "nvidia.nvcomp", _FakeNvcomp)
     monkeypatch.setattr(codecs, "_cuda_torch", lambda: None)  # the host-shuffle path
+    monkeypatch.setattr(codecs, "host_copier", lambda: None)  # nvCOMP's own copies
     monkeypatch.setattr(codecs, "_PROCESS_COMPRESSOR", {})  # none made before counts
     return _FakeNvcomp
 
 
-def test_the_nvcomp_flow_gives_the_cpu_twins_bytes(fake_nvcomp) -> None:
+@pytest.mark.parametrize("driver_copies", [False, True])
+def test_the_nvcomp_flow_gives_the_cpu_twins_bytes(fake_nvcomp, monkeypatch, driver_copies) -> None:
     """Through a stand-in for nvCOMP that compresses each piece as numcodecs does, the GPU
-    compressor gives byte for byte the CPU twin's chunks: its staging, carving and
-    regrouping are the twin's (and several calls reuse the staging buffer)."""
+    compressor gives byte for byte the CPU twin's chunks: its staging, carving, slots and
+    regrouping are the twin's -- whether its frames come back in one copy of the slots'
+    buffer into a kept one or through nvCOMP's copies -- and several calls reuse (and may
+    grow) the buffers, each call's chunks independent of the kept host buffer the next copy
+    reuses."""
+    copier = _FakeCopier()
+    if driver_copies:
+        monkeypatch.setattr(codecs, "host_copier", lambda: copier)
     gpu = codecs.NvcompZstdFrames(piece_bytes=1008)
     assert gpu.name == "nvcomp 0.0-fake"
     twin = codecs.CpuZstdFrames(piece_bytes=1008)
-    for seed in (1, 2):  # a second call reuses (and may grow) the staging buffer
+    kept = []
+    for seed in (1, 2, 3):
         arrays = [fringe_like(d, seed=seed) for d in DTYPES]
+        if seed == 3:
+            arrays = arrays[:2]  # fewer pieces than the slots kept from before
         chunks = [a.reshape(-1).view(np.uint8) for a in arrays]
         sizes = [a.dtype.itemsize for a in arrays]
         ours, theirs = gpu.encode_chunks(chunks, sizes), twin.encode_chunks(chunks, sizes)
         assert [bytes(c) for c in ours] == [bytes(c) for c in theirs]
+        kept.append((ours, [bytes(c) for c in theirs]))
+    for ours, theirs in kept:  # later copies did not change earlier chunks
+        assert [bytes(c) for c in ours] == theirs
+    assert copier.copies == (3 if driver_copies else 0)
     assert gpu.encode_chunks([], []) == []
 
 
-def test_a_store_compressed_through_the_nvcomp_flow(tmp_path, fake_nvcomp) -> None:
+@pytest.mark.parametrize("driver_copies", [False, True])
+def test_a_store_compressed_through_the_nvcomp_flow(
+    tmp_path, fake_nvcomp, monkeypatch, driver_copies
+) -> None:
+    if driver_copies:  # one copier a thread, as host_copier makes them
+        monkeypatch.setattr(codecs, "host_copier", _FakeCopier)
     path, report = _store(tmp_path, "gpu", codec="shuffle-zstd", compress_on="gpu")
     assert report.encoders == {"nvcomp 0.0-fake": 2}
     records = DatasetStore.open(path).records()

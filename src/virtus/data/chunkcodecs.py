@@ -66,25 +66,32 @@ mix both (a run resumed with another ``compress_on``): each shard record names i
 written before encoders were recorded name none). Resuming is unaffected: ``compress_on``
 is not part of a store's identity.
 
-**Does it pay?** Not on the machine measured. One NVIDIA H200 host (16 cores), 480 samples
-of 960 x 960 x 52 frames, ``shuffle-zstd`` level 1, 8 worker processes on the one GPU
-(``benchmarks/bench_dataset.py --codec shuffle-zstd --compress-on cpu gpu --gpus 1
---workers-per-gpu 8 --samples 480 --shard 4 --codecs``, one run): CPU 1,136 images/s (0.56
-CPU-s a sample, 0.29 of it compression), GPU 854 images/s (0.54 CPU-s: the host still stages,
-shuffles and waits). nvCOMP 6.0's zstd encoded one sample at 0.75-1.28 GB/s (pieces of 1 MiB
-to 64 KiB, 33.1-33.8 MB stored against numcodecs' 34.8 MB), about twice one core's numcodecs
-(0.44-0.55 GB/s) -- and the eight workers share that one GPU encoder. So ``compress_on``
-defaults to ``cpu``; ``gpu`` is there for hosts with few cores per GPU, and the store format
-stays plain Zarr whichever is chosen. No other nvCOMP algorithm is much faster: on one NVIDIA
-H100 host, the same sample staged as ``shuffle-zstd`` stages it, all pieces in one batch,
-encode and copy back (``benchmarks/bench_dataset.py --samples 1 --codecs``, nvCOMP 6.0,
-one run) gave 0.79-2.08 GB/s for Zstd (ratio 3.93-4.01), 0.66-1.98 for LZ4 (2.87), 0.66-1.75
-for Snappy, 0.40-1.04 for Deflate, 1.72-2.39 for Bitcomp (1.86) and 1.62-2.35 for Cascaded
-(1.59) -- each fastest with the smallest pieces, 64 KiB -- against
-0.49-1.07 GB/s for one core's numcodecs (blosc-lz4 0.98, shuffle-zstd 0.64). A sample is
-133 MB: the GPU's encoder carries at most 15-18 samples (about 820-940 images) a second.
-Larger batches do not help: 4 or 16 samples in one batch (64 KiB pieces, a second run) gave
-2.03-2.30 GB/s for Zstd, LZ4 and Bitcomp, as one sample did (2.02-2.34).
+**Does it pay?** Not on the hosts measured, so ``compress_on`` defaults to ``cpu``; ``gpu``
+is there for hosts with few cores per GPU, and the store format stays plain Zarr whichever
+is chosen. One NVIDIA H100 host (16 cores), 480 samples of 960 x 960 x 52 frames,
+``shuffle-zstd`` level 1, 8 worker processes on the one GPU (``benchmarks/bench_dataset.py
+--codec shuffle-zstd --compress-on cpu gpu --gpus 1 --workers-per-gpu 8 --samples 480
+--shard 4 --no-renderer``, two rounds): CPU 1,067-1,241 images/s (0.52-0.59 CPU-s a
+sample, 0.29-0.31 of it compression), GPU 979-1,116 images/s (0.43-0.45 CPU-s, 0.08 of it
+compression: staging the bytes, shuffled on the device by the host's CUDA torch); before
+frames were copied back through a kept buffer (below) the GPU gave 840 (one run). The GPU
+spares the cores a sixth of their work but the rate does not follow: each worker still
+labels, checksums and writes its own samples.
+
+**nvCOMP's encoders, measured** (``benchmarks/bench_dataset.py --samples 1 --codecs``,
+nvCOMP 6.0, one NVIDIA H100, one 133 MB sample staged as ``shuffle-zstd`` stages it, all
+pieces in one batch; the encode kernel alone, then the copy back). Zstd 10.9 ms a sample in
+32 KiB pieces (ratio 3.84), 18.2 ms in 64 KiB (3.93), 46.5 ms in 256 KiB (3.99); four
+samples in one batch 8.0 ms a sample (64 KiB). LZ4 7.5-39 ms (2.86-2.88), Snappy 5.9-34 ms
+(2.70-2.73), Deflate 9.7-54 ms (3.13-3.16), Bitcomp 0.7-0.8 ms (1.85-1.86), ANS 0.7-0.9 ms
+(1.50-1.57), Cascaded 1.9-2.9 ms (1.59) -- only Zstd is read by plain Zarr. Bringing the
+frames back costs more than encoding them when nvCOMP's ``.cpu()`` does it (57-142 ms: each
+frame into new host memory); one copy of the slots' buffer into a kept page-locked buffer
+takes 2.4-5.7 ms (:mod:`virtus.data.hostcopy`). A whole
+:meth:`NvcompZstdFrames.encode_chunks` call on a sample: 52-70 ms in 64 KiB pieces (was
+106-158 ms); the rest of it, staging the bytes up and joining each chunk's frames, is not
+split further. (An earlier survey timed ``.cpu()`` with the kernel and reported 0.4-2.4
+GB/s for every algorithm: it measured the copy, not the encoders.)
 """
 
 from __future__ import annotations
@@ -98,6 +105,7 @@ from typing import Any
 
 import numpy as np
 
+from virtus.data.hostcopy import host_copier
 from virtus.errors import BackendUnavailable, InputError, MissingDependency
 
 __all__ = [
@@ -134,10 +142,12 @@ __all__ = [
 COMPRESS_ON = ("auto", "cpu", "gpu")
 #: Codecs whose chunks the GPU writes (standard zstd frames; ``shuffle-zstd`` shuffled first).
 GPU_CODECS = ("zstd", "shuffle-zstd")
-#: Uncompressed bytes per zstd frame on the GPU path (and its CPU twin): 256 KiB pieces
-#: compress as small as whole chunks (module docstring's table) and give nvCOMP ~500
-#: independent pieces a sample to work on side by side.
-PIECE_BYTES = 1 << 18
+#: Uncompressed bytes per zstd frame on the GPU path (and its CPU twin). On an NVIDIA H100
+#: nvCOMP's Zstd kernel took 18.2 ms for a 960 x 960 sample (2,025 pieces) in 64 KiB pieces
+#: against 46.5 ms in 256 KiB ones, for 1.5 % more bytes (ratio 3.93 against 3.99; 32 KiB:
+#: 10.9 ms but 3.84 and as erratic as 40-139 ms a call): the GPU's time is what the
+#: workers share (``benchmarks/bench_dataset.py --samples 1 --codecs``).
+PIECE_BYTES = 1 << 16
 #: The oldest numcodecs that reads a chunk of several zstd frames (module docstring).
 READER_NUMCODECS = "0.16.4"
 #: The package that ``compress_on: gpu`` needs (the ``gpu`` extra of pyproject.toml).
@@ -372,6 +382,11 @@ class NvcompZstdFrames:
                     f"storage.compress_on gpu: nvCOMP finds no usable CUDA device ({error}); "
                     "use compress_on: cpu or auto"
                 ) from None
+            bound = codec.get_max_comp_buffer_size(
+                self._nvcomp.as_array(np.zeros(self.piece_bytes, np.uint8)).cuda()
+            )  # the most bytes a piece's frame may take: each frame's slot, aligned
+            self._local.slot = -(-bound // STAGING_ALIGN) * STAGING_ALIGN
+            self._local.copier = host_copier()  # nvCOMP has made the context current
             self._local.codec = codec
         return codec
 
@@ -411,13 +426,50 @@ class NvcompZstdFrames:
         if not chunks:
             return []
         starts, pieces, end = staging_layout([raw.size for raw in chunks], self.piece_bytes)
+        self._codec()  # this thread's codec, frame slot size and copier
         device = self._on_device(chunks, elementsizes, starts, end)
-        batch = self._nvcomp.as_arrays(device, [o for o, _ in pieces], [n for _, n in pieces])
-        encoded = self._codec().encode(batch).cpu()
-        frames = [np.asarray(encoded[i]).view(np.uint8) for i in range(len(encoded))]
+        lengths = [n for _, n in pieces]
+        batch = self._nvcomp.as_arrays(device, [o for o, _ in pieces], lengths)
+        frames = self._frames(batch, lengths)
         out = regroup(frames, [raw.size for raw in chunks], self.piece_bytes)
         del batch, device  # the staging buffer is free for the next call once encoded
         return out
+
+    def _frames(self, batch: Any, lengths: list[int]) -> list:
+        """Each piece's zstd frame, on the host (views valid until this thread's next call).
+
+        nvCOMP writes every frame into its slot of one kept device buffer, which is copied
+        back at once into a kept page-locked buffer (:mod:`virtus.data.hostcopy`: 2.4 ms a
+        sample, against 47-55 ms for nvCOMP's copy of each frame into new memory); where
+        the CUDA driver cannot make that copy, nvCOMP copies the frames itself."""
+        nvcomp, codec, slot = self._nvcomp, self._codec(), self._local.slot
+        count = len(lengths)
+        target = self._staging(
+            "slots",
+            slot * count,
+            lambda n: _Sized(nvcomp.as_array(np.empty(n, np.uint8)).cuda(), n),
+        ).array
+        slots = nvcomp.as_arrays(target, [k * slot for k in range(count)], [slot] * count)
+        config = codec.compression_config(lengths)  # no per-call configuration in encode
+        encoded = codec.encode(batch, out=slots, compression_config=config)
+        sizes = encoded.buffer_sizes  # waits for the kernel
+        copier = self._local.copier
+        if copier is None:
+            encoded = encoded.cpu()
+            return [np.asarray(encoded[i]).view(np.uint8) for i in range(count)]
+        host = copier.copy(target, slot * (count - 1) + sizes[-1])
+        return [host[k * slot : k * slot + n] for k, n in enumerate(sizes)]
+
+
+@dataclass(frozen=True)
+class _Sized:
+    """A device buffer and its length in bytes (nvCOMP's arrays have no ``len``)."""
+
+    array: Any
+    nbytes: int
+
+    def __len__(self) -> int:
+        return self.nbytes
 
 
 def import_nvcomp() -> Any:
