@@ -27,9 +27,10 @@ before a plane) with :func:`virtus.data.generate`, once per ``--workers`` value 
   included), and every algorithm of nvCOMP on the same sample (:func:`nvcomp_rows`: speed,
   size, and whether plain Zarr could read it);
 * with ``--compress-on cpu gpu`` (codec ``zstd`` or ``shuffle-zstd``): the same store made
-  once per setting, side by side -- images/s, CPU seconds a sample and its split
-  (render, labels, checksum, compression, io), compressed MB a sample, who encoded, and
-  whether the arrays are the same (every sample's checksum equal to the first run's);
+  once per setting, side by side -- images/s (over the run and in its steady part), CPU
+  seconds a sample and its split (render, labels, checksum, compression, io), compressed MB
+  a sample, who encoded, and whether the arrays are the same (every sample's checksum equal
+  to the first run's);
   with ``--gpus 1`` on a GPU host, else with the first ``--workers``;
 * with ``--gpus 1,2,4``: the same store made on 1, 2, 4 GPUs (``--workers-per-gpu`` pinned
   workers each, default 3/4 of the cores shared out over the most GPUs asked for), side by
@@ -343,9 +344,17 @@ def compression_runs(config, folder: Path, args, per_gpu: int | None, frames: in
     runs, first = [], None
     for value in args.compress_on:
         path = folder / f"store_{value}"
+        ticks: list[tuple[float, int]] = []
+
+        def progress(done: int, total: int, rendered: int, ticks=ticks) -> None:
+            ticks.append((time.perf_counter(), rendered))
+
         before = cpu_seconds()
-        report = generate(dataclasses.replace(config, compress_on=value), path, **where)
+        report = generate(
+            dataclasses.replace(config, compress_on=value), path, progress=progress, **where
+        )
         cpu = cpu_seconds() - before
+        steady = steady_rate(ticks, args.samples)
         store = DatasetStore.open(path)
         checksums = {i: m["checksum"] for i, m in store.samples().items()}
         first = checksums if first is None else first
@@ -356,6 +365,7 @@ def compression_runs(config, folder: Path, args, per_gpu: int | None, frames: in
                 "compress_on": value, **where, "encoders": report.encoders,
                 "note": report.compression_note, "seconds": round(report.seconds, 3),
                 "images_per_s": round(args.samples * frames / report.seconds, 1),
+                "steady_images_per_s": steady and round(steady * frames, 1),
                 "cpu_s_per_sample": round(cpu / args.samples, 4),
                 "stage_s_per_sample": stages, "mb_per_sample": round(size / args.samples / 1e6, 2),
                 "same_arrays_as_first": checksums == first,
@@ -371,7 +381,8 @@ def compression_line(entry: dict) -> str:
     split = ", ".join(f"{k} {stages[k]:.3f}" for k in TIMING_KEYS if k != "write")
     return (
         f"compress_on {entry['compress_on']} ({', '.join(entry['encoders'])}): "
-        f"{entry['images_per_s']:.1f} images/s, {entry['cpu_s_per_sample']:.3f} CPU-s a sample "
+        f"{entry['images_per_s']:.1f} images/s ({entry.get('steady_images_per_s')} in the "
+        f"steady part), {entry['cpu_s_per_sample']:.3f} CPU-s a sample "
         f"(stage s a sample: {split}), {entry['mb_per_sample']:.1f} MB a sample, same arrays "
         f"as the first: {entry['same_arrays_as_first']}"
     )

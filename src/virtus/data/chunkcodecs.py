@@ -66,17 +66,17 @@ mix both (a run resumed with another ``compress_on``): each shard record names i
 written before encoders were recorded name none). Resuming is unaffected: ``compress_on``
 is not part of a store's identity.
 
-**Does it pay?** Not on the hosts measured, so ``compress_on`` defaults to ``cpu``; ``gpu``
-is there for hosts with few cores per GPU, and the store format stays plain Zarr whichever
-is chosen. One NVIDIA H100 host (16 cores), 480 samples of 960 x 960 x 52 frames,
+**Does it pay?** Not clearly on the hosts measured, so ``compress_on`` defaults to ``cpu``;
+``gpu`` is there for hosts with few cores per GPU, and the store format stays plain Zarr
+whichever is chosen. NVIDIA H100 hosts (16 cores), 960 x 960 x 52 frames,
 ``shuffle-zstd`` level 1, 8 worker processes on the one GPU (``benchmarks/bench_dataset.py
---codec shuffle-zstd --compress-on cpu gpu --gpus 1 --workers-per-gpu 8 --samples 480
---shard 4 --no-renderer``, two rounds): CPU 1,067-1,241 images/s (0.52-0.59 CPU-s a
-sample, 0.29-0.31 of it compression), GPU 979-1,116 images/s (0.43-0.45 CPU-s, 0.08 of it
-compression: staging the bytes, shuffled on the device by the host's CUDA torch); before
-frames were copied back through a kept buffer (below) the GPU gave 840 (one run). The GPU
-spares the cores a sixth of their work but the rate does not follow: each worker still
-labels, checksums and writes its own samples.
+--codec shuffle-zstd --compress-on cpu gpu --gpus 1 --workers-per-gpu 8 --samples N
+--shard 4 --no-renderer``, two rounds each of N = 480 and 720): over the whole run CPU
+983-1,241 images/s, GPU 979-1,163; in the steady part of the 720-sample runs CPU
+1,139-1,441, GPU 1,564-1,728. A sample costs the cores 0.52-0.59 CPU-s compressing on
+them (0.29-0.33 of it compression), 0.38-0.45 on the GPU (0.08 of it compression: staging
+the bytes, shuffled on the device by the host's CUDA torch); before frames were copied back
+through a kept buffer (below) the GPU gave 840 images/s over a 480-sample run (one run).
 
 **nvCOMP's encoders, measured** (``benchmarks/bench_dataset.py --samples 1 --codecs``,
 nvCOMP 6.0, one NVIDIA H100, one 133 MB sample staged as ``shuffle-zstd`` stages it, all
