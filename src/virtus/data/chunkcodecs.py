@@ -440,7 +440,7 @@ class NvcompZstdFrames:
 
         nvCOMP writes every frame into its slot of one kept device buffer, which is copied
         back at once into a kept page-locked buffer (:mod:`virtus.data.hostcopy`: 2.4 ms a
-        sample, against 47-55 ms for nvCOMP's copy of each frame into new memory); where
+        sample, against 47-58 ms for nvCOMP's copy of each frame into new memory); where
         the CUDA driver cannot make that copy, nvCOMP copies the frames itself."""
         nvcomp, codec, slot = self._nvcomp, self._codec(), self._local.slot
         count = len(lengths)

@@ -81,11 +81,6 @@ def _device_address(array: Any) -> int:
     return array.__cuda_array_interface__["data"][0]
 
 
-def _check(status: int, what: str) -> None:
-    if status != 0:
-        raise RuntimeError(f"CUDA driver error {status} {what}")
-
-
 class HostCopier:
     """Device-to-host copies into one kept page-locked buffer.
 
@@ -109,7 +104,8 @@ class HostCopier:
         """
         host = self._kept.at_least(nbytes)
         status = self._driver.cuMemcpyDtoH_v2(host.ctypes.data, _device_address(source), nbytes)
-        _check(status, f"copying {nbytes} bytes to the host")
+        if status != 0:
+            raise RuntimeError(f"CUDA driver error {status} copying {nbytes} bytes to the host")
         return host[:nbytes]
 
 
