@@ -171,6 +171,7 @@ def test_each_worker_of_a_real_pool_sees_its_own_gpu_before_the_renderer_loads(
         answer = by_index[index]
         assert answer["env"] == device and answer["pinned"]["device"] == device
         assert answer["pinned"]["renderer_loaded"] == []  # CUDA_VISIBLE_DEVICES came first
+        assert answer["pinned"]["blocking_waits"] is False  # no such GPU (or no driver) here
         assert answer["threads"] == 1 and answer["write_threads"] == 1
         assert answer["order"] == "PCI_BUS_ID"  # ordinals as nvidia-smi numbers them
     # without devices the workers are not pinned (and keep what they inherited)
@@ -178,4 +179,5 @@ def test_each_worker_of_a_real_pool_sees_its_own_gpu_before_the_renderer_loads(
     with pinned_pool(1) as pool:
         answer = pool.submit(_probe, str(tmp_path / "cpu"), 1).result()
     assert answer["pinned"]["device"] is None and answer["env"] is None
+    assert answer["pinned"]["blocking_waits"] is False  # a CPU worker never starts CUDA
     assert answer["order"] is None

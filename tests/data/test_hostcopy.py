@@ -70,5 +70,5 @@ def test_a_refused_copy_raises_with_the_drivers_code() -> None:
 
 
 def test_no_copier_without_the_driver(monkeypatch) -> None:
-    monkeypatch.setattr(hostcopy, "DRIVER_LIBRARY", "libvirtus-no-such-driver.so.1")
+    monkeypatch.setattr(hostcopy, "driver", lambda: None)
     assert hostcopy.host_copier() is None

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from virtus.data.config import MAX_WORKERS
+from virtus.data.cudadriver import block_while_waiting
 from virtus.errors import InputError
 
 __all__ = [
@@ -283,15 +284,18 @@ def _pin(
         "index": index,
         "device": device,
         "renderer_loaded": sorted(m for m in ("drjit", "mitsuba", "torch") if m in sys.modules),
+        # Workers sharing a GPU wait for it most of the time: asleep, not spinning on cores.
+        "blocking_waits": device is not None and block_while_waiting(),
     }
     if then is not None:
         then(*args)
 
 
 def pinned() -> dict[str, Any] | None:
-    """In a worker of :func:`pinned_pool`: its ``index``, its ``device`` (None on CPU) and
-    ``renderer_loaded``, the renderer modules already imported when it was pinned (none);
-    None in any other process."""
+    """In a worker of :func:`pinned_pool`: its ``index``, its ``device`` (None on CPU),
+    ``renderer_loaded``, the renderer modules already imported when it was pinned (none),
+    and ``blocking_waits``, whether its threads sleep while they wait for the GPU
+    (:func:`virtus.data.cudadriver.block_while_waiting`); None in any other process."""
     return None if _PINNED is None else dict(_PINNED)
 
 

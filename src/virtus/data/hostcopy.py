@@ -1,5 +1,5 @@
 """Copies from CUDA device memory into a kept, page-locked host buffer, through the CUDA
-driver (``libcuda.so.1``, present wherever a CUDA device works): how the GPU compressor
+driver (:mod:`virtus.data.cudadriver`): how the GPU compressor
 (:class:`virtus.data.chunkcodecs.NvcompZstdFrames`) brings its frames back.
 
 Why not nvCOMP's own copy: ``.cpu()`` copies every frame into newly allocated host memory,
@@ -20,30 +20,9 @@ from typing import Any
 
 import numpy as np
 
+from virtus.data.cudadriver import driver
+
 __all__ = ["HostCopier", "host_copier"]
-
-#: The driver library every CUDA installation provides (the runtime links it at run time).
-DRIVER_LIBRARY = "libcuda.so.1"
-
-
-def _driver() -> Any:
-    """The CUDA driver's library with the signatures used here, or None where it does not
-    load (no NVIDIA driver on this machine)."""
-    try:
-        lib = ctypes.CDLL(DRIVER_LIBRARY)
-    except OSError:
-        return None
-    size, pointer, device = ctypes.c_size_t, ctypes.c_void_p, ctypes.c_uint64
-    signatures = {
-        "cuCtxGetCurrent": [ctypes.POINTER(pointer)],
-        "cuMemHostRegister_v2": [pointer, size, ctypes.c_uint],
-        "cuMemHostUnregister": [pointer],
-        "cuMemcpyDtoH_v2": [pointer, device, size],
-    }
-    for name, arguments in signatures.items():
-        function = getattr(lib, name)
-        function.argtypes, function.restype = arguments, ctypes.c_int
-    return lib
 
 
 class _LockedBuffer:
@@ -86,7 +65,7 @@ class HostCopier:
 
     Parameters
     ----------
-    driver : the CUDA driver library (:func:`host_copier` finds it).
+    driver : the CUDA driver library (:func:`virtus.data.cudadriver.driver`).
     """
 
     def __init__(self, driver: Any) -> None:
@@ -112,10 +91,10 @@ class HostCopier:
 def host_copier() -> HostCopier | None:
     """A copier for this thread, or None where the driver does not load or the thread has
     no current CUDA context (call it after nvCOMP has worked on the thread)."""
-    driver = _driver()
-    if driver is None:
+    lib = driver()
+    if lib is None:
         return None
     context = ctypes.c_void_p()
-    if driver.cuCtxGetCurrent(ctypes.byref(context)) != 0 or not context.value:
+    if lib.cuCtxGetCurrent(ctypes.byref(context)) != 0 or not context.value:
         return None
-    return HostCopier(driver)
+    return HostCopier(lib)
