@@ -345,8 +345,11 @@ class NvcompZstdFrames:
     buffer on the device (:func:`staging_layout`: chunk starts aligned, pieces carved from it
     by offset): with a CUDA build of torch each chunk is copied up and byte-shuffled on the
     device, else shuffled into a host staging buffer (:func:`stage_on_host`) that is copied
-    up at once. Staging buffers are kept per thread and grow as needed. nvCOMP's Zstd has
-    no level setting: ``level`` in ``zarr.json`` is the CPU's. An nvCOMP ``Codec`` must not
+    up at once. The frames are written into slots of a device buffer and come back in one
+    copy into a page-locked host buffer (:meth:`_frames`). These buffers are kept per
+    thread and grow as needed: each about as large as the uncompressed bytes of the largest
+    call (a shard's, in a worker), on the device and (page-locked) on the host. nvCOMP's
+    Zstd has no level setting: ``level`` in ``zarr.json`` is the CPU's. An nvCOMP ``Codec`` must not
     be used by two threads at once (its manager and scratch buffers), so each thread that
     encodes makes its own (a pipelined run encodes on two).
 
