@@ -252,7 +252,7 @@ def nvcomp_rows(sample: dict, repeats: int = 3) -> list[dict]:
     ``.cpu()`` does (each frame into new host memory); bytes, ratio, and whether plain Zarr
     could read the result. The best of ``repeats`` after a warm-up (the upload is not
     timed). Empty without nvCOMP or a GPU."""
-    from virtus.data.chunkcodecs import import_nvcomp, shuffle_bytes
+    from virtus.data.chunkcodecs import STAGING_ALIGN, import_nvcomp, shuffle_bytes
     from virtus.data.hostcopy import host_copier
     from virtus.errors import VirtusError
 
@@ -287,7 +287,7 @@ def nvcomp_rows(sample: dict, repeats: int = 3) -> list[dict]:
                 algorithm=algorithm, bitstream_kind=nvcomp.BitstreamKind.RAW,
                 uncomp_chunk_size=piece,
             )  # fmt: skip
-            slot = -(-codec.get_max_comp_buffer_size(batch[0]) // 16) * 16
+            slot = -(-codec.get_max_comp_buffer_size(batch[0]) // STAGING_ALIGN) * STAGING_ALIGN
             target = nvcomp.as_array(np.empty(slot * len(bounds), np.uint8)).cuda()
             slots = nvcomp.as_arrays(target, [k * slot for k in range(len(bounds))],
                                      [slot] * len(bounds))  # fmt: skip

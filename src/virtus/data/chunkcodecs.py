@@ -349,9 +349,9 @@ class NvcompZstdFrames:
     copy into a page-locked host buffer (:meth:`_frames`). These buffers are kept per
     thread and grow as needed: each about as large as the uncompressed bytes of the largest
     call (a shard's, in a worker), on the device and (page-locked) on the host. nvCOMP's
-    Zstd has no level setting: ``level`` in ``zarr.json`` is the CPU's. An nvCOMP ``Codec`` must not
-    be used by two threads at once (its manager and scratch buffers), so each thread that
-    encodes makes its own (a pipelined run encodes on two).
+    Zstd has no level setting: ``level`` in ``zarr.json`` is the CPU's. An nvCOMP
+    ``Codec`` must not be used by two threads at once (its manager and scratch buffers), so
+    each thread that encodes makes its own (a pipelined run encodes on two).
 
     Raises
     ------

@@ -25,43 +25,14 @@ from virtus.data.cudadriver import driver
 __all__ = ["HostCopier", "host_copier"]
 
 
-class _LockedBuffer:
-    """A host buffer kept (grown as needed) and page-locked where the driver allows it
-    (copies from an unlocked one are correct, only slower)."""
-
-    def __init__(self, driver: Any) -> None:
-        self._driver = driver
-        self.array = np.empty(0, np.uint8)
-        self._locked = 0  # the locked buffer's address (0: none is locked)
-
-    def at_least(self, nbytes: int) -> np.ndarray:
-        """The buffer, grown to at least ``nbytes`` (its contents are then lost)."""
-        if self.array.size < nbytes:
-            self.release()
-            self.array = np.empty(nbytes, np.uint8)
-            address = self.array.ctypes.data
-            if self._driver.cuMemHostRegister_v2(address, nbytes, 0) == 0:
-                self._locked = address
-        return self.array
-
-    def release(self) -> None:
-        """Unlock the pages before the buffer goes (at exit the driver may already have let
-        them go: its answer is not checked)."""
-        if self._locked:
-            self._driver.cuMemHostUnregister(self._locked)
-            self._locked = 0
-
-    def __del__(self) -> None:
-        self.release()
-
-
 def _device_address(array: Any) -> int:
     """Where a device array (``__cuda_array_interface__``) starts."""
     return array.__cuda_array_interface__["data"][0]
 
 
 class HostCopier:
-    """Device-to-host copies into one kept page-locked buffer.
+    """Device-to-host copies into one host buffer, kept (grown as needed) and page-locked
+    where the driver allows it (copies into an unlocked one are correct, only slower).
 
     Parameters
     ----------
@@ -70,7 +41,8 @@ class HostCopier:
 
     def __init__(self, driver: Any) -> None:
         self._driver = driver
-        self._kept = _LockedBuffer(driver)
+        self._buffer = np.empty(0, np.uint8)
+        self._locked = 0  # the locked buffer's address (0: none is locked)
 
     def copy(self, source: Any, nbytes: int) -> np.ndarray:
         """The first ``nbytes`` of ``source`` (device memory with
@@ -81,11 +53,27 @@ class HostCopier:
         ------
         RuntimeError : the driver refused the copy (its error code said).
         """
-        host = self._kept.at_least(nbytes)
+        if self._buffer.size < nbytes:
+            self._release()
+            self._buffer = np.empty(nbytes, np.uint8)
+            address = self._buffer.ctypes.data
+            if self._driver.cuMemHostRegister_v2(address, nbytes, 0) == 0:
+                self._locked = address
+        host = self._buffer
         status = self._driver.cuMemcpyDtoH_v2(host.ctypes.data, _device_address(source), nbytes)
         if status != 0:
             raise RuntimeError(f"CUDA driver error {status} copying {nbytes} bytes to the host")
         return host[:nbytes]
+
+    def _release(self) -> None:
+        """Unlock the pages before the buffer goes (at exit the driver may already have let
+        them go: its answer is not checked)."""
+        if self._locked:
+            self._driver.cuMemHostUnregister(self._locked)
+            self._locked = 0
+
+    def __del__(self) -> None:
+        self._release()
 
 
 def host_copier() -> HostCopier | None:
