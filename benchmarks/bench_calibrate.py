@@ -12,17 +12,20 @@ was before the second round of issue 25 ("old": centroids refined circle by circ
 observed in spawned worker processes on hosts of 4+ CPUs and here on smaller ones, whole
 frames decoded on the host) against today's ("new": every circle's centroid window in one
 batch, poses observed in threads of this process, only the board's window decoded on the
-host), with the stages, the CPU seconds, the calibration's RMS to 4 decimals and whether
-``calibration.json`` is byte-identical. Then the parts of one pose, old vs new (host
-decode of the whole frame; "frame/window": today's decode of the whole frame against that
-of the board's window; wrapped phase of one phase set; refined centroids; local
-homographies; whole observation; "old" is before issue 25 there: one
+host, and where a GPU renders, the local homographies fitted on it) and, there, today's
+with the homographies fitted on the host ("host fit"), with the stages, the CPU seconds,
+the calibration's RMS to 4 decimals and whether ``calibration.json`` is byte-identical.
+Then the parts of one pose, old vs new (host decode of the whole frame; "frame/window":
+today's decode of the whole frame against that of the board's window; wrapped phase of
+one phase set; refined centroids; local homographies (and, where a GPU renders, the same
+fitted on it); whole observation; "old" is before issue 25 there: one
 ``cv2.findHomography`` RANSAC fit per circle, the wrapped phase on a float64 copy of the
 whole stack, per-circle centroids) on the first ``--parts-poses`` poses rendered on the
 host, with how far the old and new projector points and centroids are apart. Last, the
 observation alone of ``--observer-poses`` poses rendered and decoded once: here, in 2, 4,
-... threads and in spawned processes (how observation scales with the host's cores,
-without the renderer beside it).
+... threads and in spawned processes, and where a GPU renders in threads that fit the
+homographies on it (how observation scales with the host's cores, without the renderer
+beside it).
 
     PYTHONPATH=src python benchmarks/bench_calibrate.py [--board 7x13] [--repeat 3]
         [--parts-poses 3] [--observer-poses 18] [--skip-cli] [--json out.json]
@@ -90,13 +93,19 @@ def observation(kind: str) -> Iterator[None]:
 
     saved = (observe.local_homographies, phase.wrapped_phase, detect._centroids)
     if kind == "old":
-        observe.local_homographies = projector.local_homographies_per_circle
+        observe.local_homographies = partial(_on_host, projector.local_homographies_per_circle)
         phase.wrapped_phase = wrapped_phase_before
         detect._centroids = detect._centroids_per_circle
     try:
         yield
     finally:
         observe.local_homographies, phase.wrapped_phase, detect._centroids = saved
+
+
+def _on_host(fit: Callable, *arguments: Any, device: str | None = None, **options: Any) -> Any:
+    """``fit`` (a fit of the host alone) called as ``local_homographies``, whatever the
+    device asked for."""
+    return fit(*arguments, **options)
 
 
 def processes_before() -> int:
@@ -106,13 +115,13 @@ def processes_before() -> int:
     return 0 if cpus < 4 else min(8, cpus - 1)
 
 
-def observe_timed_before(*arguments: Any) -> Any:
+def observe_timed_before(*arguments: Any, **options: Any) -> Any:
     """``virtus.calib.observers.observe_timed`` with the per-circle centroids (in a worker
     process too: spawned workers import this script, so the patch reaches them)."""
     from virtus.calib import detect, observers
 
     detect._centroids = detect._centroids_per_circle
-    return observers.observe_timed(*arguments)
+    return observers.observe_timed(*arguments, **options)
 
 
 @contextmanager
@@ -145,19 +154,39 @@ def cpu_seconds() -> float:
     return times.user + times.system + times.children_user + times.children_system
 
 
+@contextmanager
+def fit_on_host() -> Iterator[None]:
+    """Today's library call with the local homographies fitted on the host even when the
+    poses render on a GPU (as before the third round of issue 25)."""
+    from virtus.pipeline import calibrate
+
+    saved = calibrate.fit_device
+    calibrate.fit_device = lambda on_gpu: None
+    try:
+        yield
+    finally:
+        calibrate.fit_device = saved
+
+
 def compare_totals(board: str, repeat: int) -> dict[str, Any]:
-    """The library call as before the second round of issue 25 and as now, alternating,
-    ``repeat`` times each: wall, stages and RMS per run, and whether the files agree."""
+    """The library call as before the second round of issue 25 ("old"), as now with the
+    local homographies fitted on the host ("host fit", only where a GPU renders: there they
+    are fitted on it) and as now ("new"), alternating, ``repeat`` times each: wall, stages
+    and RMS per run, and whether the files agree with the old ones."""
+    from virtus.calib.observe import fit_device
     from virtus.pipeline.calibrate import calibrate_rig
     from virtus.scanner import Scanner
 
-    runs: dict[str, list[dict[str, Any]]] = {"old": [], "new": []}
-    same_files = True
+    device = fit_device(Scanner().renders_on_gpu)
+    kinds = ["old", "host fit", "new"] if device is not None else ["old", "new"]
+    runs: dict[str, list[dict[str, Any]]] = {kind: [] for kind in kinds}
+    same_files = {kind: True for kind in kinds[1:]}
     with tempfile.TemporaryDirectory() as tmp:
         for index in range(repeat):
-            for kind in ("old", "new"):
+            for kind in kinds:
                 out = Path(tmp) / f"{kind}{index}"
-                with calibration_before() if kind == "old" else nullcontext(None) as processes:
+                variant = {"old": calibration_before, "host fit": fit_on_host}.get(kind)
+                with variant() if variant else nullcontext(None) as processes:
                     start, cpu = time.perf_counter(), cpu_seconds()
                     result = calibrate_rig(Scanner(), board=board, out_dir=out, processes=processes)
                     wall, cpu = time.perf_counter() - start, cpu_seconds() - cpu
@@ -165,27 +194,34 @@ def compare_totals(board: str, repeat: int) -> dict[str, Any]:
                     {"s": wall, "cpu_s": cpu, "stages_s": result.timing_s, "rms_px": result.rms_px}
                 )
             old_result = (Path(tmp) / f"old{index}" / "calibration.json").read_bytes()
-            same_files &= old_result == (out / "calibration.json").read_bytes()
+            for kind in kinds[1:]:
+                same = (Path(tmp) / f"{kind}{index}" / "calibration.json").read_bytes()
+                same_files[kind] &= old_result == same
     before = processes_before()
     print(
         f"\nold (per-circle centroids, observed {f'in {before} processes' if before else 'here'},"
         f" whole frames decoded) vs new (batched centroids, observed in threads, board window"
-        f" decoded), {repeat} runs each, alternating"
+        f" decoded{f', homographies fitted on {device}' if device else ''}), {repeat} runs "
+        "each, alternating"
     )
-    print(f"{'':<30} {'old':>17} {'new':>17} {'old/new':>9}")
+    print(f"{'':<30}" + "".join(f" {kind:>17}" for kind in kinds) + f" {'old/new':>9}")
     stages = [(k, k) for k in ("render_s", "observe_s", "calibrate_s")]
     keys = [("library total", "s"), ("CPU s (all threads+workers)", "cpu_s"), *stages]
     for label, key in keys:
-        old = [r[key] if key in r else r["stages_s"][key] for r in runs["old"]]
-        new = [r[key] if key in r else r["stages_s"][key] for r in runs["new"]]
+        values = {
+            kind: [r[key] if key in r else r["stages_s"][key] for r in runs[kind]] for kind in kinds
+        }
+        old, new = values["old"], values["new"]
         ratio = f"{min(old) / max(new):.2f}-{max(old) / min(new):.2f}"
         name = label if key != "observe_s" else "observe_s (summed, workers)"
-        print(f"{name:<30} {spread(old):>17} {spread(new):>17} {ratio:>9}")
+        print(f"{name:<30}" + "".join(f" {spread(values[k]):>17}" for k in kinds) + f" {ratio:>9}")
     rms = {kind: {k: round(v, 4) for k, v in runs[kind][0]["rms_px"].items()} for kind in runs}
-    print(f"rms px old: {json.dumps(rms['old'])}\nrms px new: {json.dumps(rms['new'])}")
-    print("same calibration to 4 decimals:", rms["old"] == rms["new"])
-    print("calibration.json byte-identical in every pair:", same_files)
-    return {**runs, "same_calibration_json": same_files}
+    for kind in kinds:
+        print(f"rms px {kind}: {json.dumps(rms[kind])}")
+    print("same calibration to 4 decimals:", all(rms[k] == rms["old"] for k in kinds))
+    for kind in kinds[1:]:
+        print(f"calibration.json of {kind} byte-identical to old in every pair:", same_files[kind])
+    return {**runs, "same_calibration_json": same_files, "fit_device": device}
 
 
 def _timed(function: Callable[[], Any], repeat: int) -> tuple[list[float], Any]:
@@ -214,7 +250,8 @@ def compare_parts(board_spec: str, n_poses: int, repeat: int) -> dict[str, Any]:
     kinds = [frame.kind for frame in scanner.sequence.frames]
     first_set = _one_phase_set([i for i, kind in enumerate(kinds) if kind == "phase"])
     times: dict[str, dict[str, list[float]]] = {}
-    worst = worst_centroid = 0.0
+    worst = worst_centroid = device_worst = device_worst_centroid = 0.0
+    device, device_fit, device_centroids = observe.fit_device(scanner.renders_on_gpu), [], []
     for index, pose in enumerate(pose_set("paper", scanner.rig, board, 1)[:n_poses]):
         capture = scanner.capture(board_scene(board, pose, texture), rng=index, command=[])
         frames = capture.frames[first_set]
@@ -248,6 +285,12 @@ def compare_parts(board_spec: str, n_poses: int, repeat: int) -> dict[str, Any]:
                 seconds, homographies = _timed(partial(fit, decoded.proj_uv, board, centres), 1)
                 part.setdefault("local homographies", []).extend(seconds)
                 points[kind] = projector.apply_homographies(homographies, centres)
+                if kind == "new" and device is not None:
+                    on_device = partial(fit, decoded.proj_uv, board, centres, device=device)
+                    seconds, homographies = _timed(on_device, 1)
+                    device_fit.extend(seconds)
+                    moved = projector.apply_homographies(homographies, centres) - points["new"]
+                    device_worst = max(device_worst, float(np.nanmax(np.abs(moved))))
                 saved, detect._centroids = detect._centroids, one_pass
                 try:
                     refine = partial(detect.refine_points, decoded.background, board, centres)
@@ -255,6 +298,11 @@ def compare_parts(board_spec: str, n_poses: int, repeat: int) -> dict[str, Any]:
                 finally:
                     detect._centroids = saved
                 part.setdefault("refined centroids", []).extend(seconds)
+                if kind == "new" and device is not None:
+                    seconds, found = _timed(partial(refine, device=device), 1)
+                    device_centroids.extend(seconds)
+                    moved = np.abs(found - centroids["new"])
+                    device_worst_centroid = max(device_worst_centroid, float(np.nanmax(moved)))
         worst = max(worst, float(np.nanmax(np.linalg.norm(points["old"] - points["new"], axis=1))))
         moved = np.linalg.norm(centroids["old"] - centroids["new"], axis=1)
         worst_centroid = max(worst_centroid, float(np.nanmax(moved)))
@@ -266,7 +314,20 @@ def compare_parts(board_spec: str, n_poses: int, repeat: int) -> dict[str, Any]:
         print(f"{name:<26} {spread(old):>17} {spread(new):>17} {ratio:>17.2f}")
     print(f"projector points, old - new: max {worst:.2e} px")
     print(f"refined centroids, old - new: max {worst_centroid:.2e} px")
+    if device_fit:
+        print(
+            f"local homographies fitted on {device}: {spread(device_fit)} (new on the host: "
+            f"{spread(times['new']['local homographies'])}), points apart by at most "
+            f"{device_worst:.2e} px"
+        )
+        print(
+            f"refined centroids on {device}: {spread(device_centroids)} (new on the host: "
+            f"{spread(times['new']['refined centroids'])}), apart by at most "
+            f"{device_worst_centroid:.2e} px"
+        )
     return {
+        "device_fit_s": device_fit,
+        "device_centroids_s": device_centroids,
         "times_s": times,
         "max_point_difference_px": worst,
         "max_centroid_difference_px": worst_centroid,
@@ -279,6 +340,7 @@ def compare_observers(board_spec: str, n_poses: int, repeat: int) -> dict[str, A
     the CPUs, and the default), and spawned processes as before (start-up included, as
     in a calibration), alternating, ``repeat`` times each; and that they agree."""
     from virtus.calib.board import board_from_spec
+    from virtus.calib.observe import fit_device
     from virtus.calib.observers import Observers, observe_timed, observer_pool, observers
     from virtus.calib.poses import pose_set
     from virtus.calib.scene import board_scene, board_texture
@@ -291,24 +353,30 @@ def compare_observers(board_spec: str, n_poses: int, repeat: int) -> dict[str, A
         view = scanner.decoded_view(board_scene(board, pose, texture), rng=index)
         views.append((view.decoded.proj_uv, view.decoded.background, view.white, board, pose.name))
     cpus = os.cpu_count() or 1
-    kinds = [Observers("here", 0)]
-    kinds += [Observers("threads", k) for k in (2, 4, 8, 16) if k <= cpus]
-    kinds += [observers(None)] if observers(None) not in kinds else []
-    kinds += [Observers("processes", max(processes_before(), 2))]
+    kinds: list[tuple[Observers, str | None]] = [(Observers("here", 0), None)]
+    kinds += [(Observers("threads", k), None) for k in (2, 4, 8, 16) if k <= cpus]
+    kinds += [(observers(None), None)] if (observers(None), None) not in kinds else []
+    kinds += [(Observers("processes", max(processes_before(), 2)), None)]
+    device = fit_device(scanner.renders_on_gpu)
+    if device is not None:  # as a calibration rendered on a GPU observes
+        kinds += [(Observers("threads", k), device) for k in (2, 4, 8) if k <= cpus]
     times: dict[str, list[float]] = {}
     reference = None
     for _ in range(repeat):
-        for chosen in kinds:
+        for chosen, on in kinds:
             start = time.perf_counter()
             with observer_pool(chosen) as pool:
-                jobs = [pool.submit(observe_timed, *view) for view in views]
+                jobs = [pool.submit(observe_timed, *view, device=on) for view in views]
                 found = [job.result()[0] for job in jobs]
-            times.setdefault(f"{chosen.kind} {chosen.count}", []).append(
-                time.perf_counter() - start
-            )
+            label = f"{chosen.kind} {chosen.count}" + (f", fit on {on}" if on else "")
+            times.setdefault(label, []).append(time.perf_counter() - start)
             centroids = np.array([obs.cam_centroids for obs in found])
             reference = centroids if reference is None else reference
-            if not np.array_equal(centroids, reference, equal_nan=True):
+            if on:  # on the device: the host's centroids to rounding
+                agree = np.allclose(centroids, reference, rtol=0, atol=1e-9, equal_nan=True)
+            else:
+                agree = np.array_equal(centroids, reference, equal_nan=True)
+            if not agree:
                 raise AssertionError(f"{chosen} observed other centroids")
     print(f"\nobservation alone, {len(views)} decoded poses, {repeat} runs each, alternating")
     base = float(np.median(times["here 0"]))

@@ -127,3 +127,43 @@ def test_batched_centroids_reject_the_circles_the_per_circle_pass_rejects(image,
         np.testing.assert_allclose(batched, reference, rtol=0, atol=1e-9)
     lost = np.isnan(refine_centres(cut, BOARD, shifted)[:, 0])
     assert lost[17] and 5 <= lost.sum() < BOARD.n_points - 4
+
+
+def test_centroids_on_a_torch_device_are_the_host_ones(image, monkeypatch) -> None:
+    # A calibration rendered on a GPU refines its centroids there with this same code;
+    # torch on the CPU is its twin. Rejected circles, a light board and the one-by-one
+    # least squares of a singular ring must match too.
+    pytest.importorskip("torch")
+    centres, _ = _truth()
+    cut = image[:, 70:].copy()
+    shifted = centres - (70.0, 0.0)
+    u, v = np.rint(shifted[17]).astype(int)
+    cut[v - 14 : v + 15, u - 14 : u + 15] = 0.0
+    light = board_from_spec("circles:4x7,spacing_mm=12,diameter_mm=6,border_mm=6,white_on_black")
+    cases = ((BOARD, image, centres), (BOARD, cut, shifted), (light, 1.0 - image, centres))
+    for board, picture, points in cases:
+        host = refine_centres(picture, board, points)
+        twin = refine_centres(picture, board, points, device="cpu")
+        np.testing.assert_array_equal(np.isnan(twin), np.isnan(host))
+        np.testing.assert_allclose(twin, host, rtol=0, atol=1e-9)
+    import torch
+
+    solve = torch.linalg.solve
+
+    def singular(*arguments):
+        raise torch.linalg.LinAlgError("singular")
+
+    monkeypatch.setattr(torch.linalg, "solve", singular)
+    fallback = refine_centres(image, BOARD, centres, device="cpu")
+    monkeypatch.setattr(torch.linalg, "solve", solve)
+    np.testing.assert_allclose(fallback, refine_centres(image, BOARD, centres), rtol=0, atol=1e-9)
+
+
+def test_the_per_circle_reference_refuses_a_device() -> None:
+    from virtus.calib.arrayspace import torch_space
+
+    pytest.importorskip("torch")
+    centres, _ = _truth()
+    H = detect.fit_homography(BOARD.object_points[:, :2], centres)  # noqa: N806
+    with pytest.raises(ValueError, match="numpy arrays only"):
+        detect._centroids_per_circle(_board_image(), BOARD, centres, H, torch_space("cpu"))

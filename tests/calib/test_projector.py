@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from tests.pipeline.test_calibrate_resume import quarter_rig
-from virtus.calib import projector
+from virtus.calib import arrayspace, projector, windowfit
 from virtus.calib.board import board_from_spec
 from virtus.calib.detect import find_grid
 from virtus.calib.poses import pose_set
@@ -149,6 +149,65 @@ def test_row_medians_of_degenerate_fits_are_nan_without_a_warning():
     filters = list(warnings.filters)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        median = projector._row_medians(residual)
+        median = windowfit._row_medians(arrayspace.NUMPY, residual)
     np.testing.assert_array_equal(median, [[2.0], [np.nan], [0.5]])
     assert warnings.filters == filters
+
+
+@pytest.fixture(scope="module")
+def torch_cpu() -> str:
+    """The torch device of the fit's CPU twin (a CUDA device fits with the same code)."""
+    pytest.importorskip("torch")
+    return "cpu"
+
+
+def test_torch_row_medians_are_numpys_nanmedian(torch_cpu):
+    import torch
+
+    residual = np.array([[1.0, np.nan, 3.0, 2.0], [np.nan] * 4, [0.5, 0.7, np.nan, np.nan]])
+    space = arrayspace.torch_space(torch_cpu)
+    median = windowfit._row_medians(space, torch.as_tensor(residual))
+    # The mean of the two middle values for an even count, as np.nanmedian (torch's own
+    # nanmedian takes the lower one).
+    np.testing.assert_array_equal(median.numpy(), [[2.0], [np.nan], [0.6]])
+
+
+@pytest.mark.parametrize("case", ["rendered", "corrupted", "stripes", "holes"])
+def test_torch_fit_gives_the_numpy_fit(rendered, torch_cpu, case):
+    # The device path runs this same code on CUDA tensors; torch on the CPU is its twin.
+    if case == "stripes":
+        proj_uv, centres, _ = synthetic_map(stripe=2.0)
+    elif case == "holes":
+        proj_uv, centres, _ = synthetic_map()
+        vv, uu = np.mgrid[0 : proj_uv.shape[0], 0 : proj_uv.shape[1]]
+        proj_uv[np.hypot(uu - centres[5, 0], vv - centres[5, 1]) < 30] = np.nan
+    else:
+        proj_uv, centres = rendered
+    if case == "corrupted":
+        rng = np.random.default_rng(3)
+        proj_uv = proj_uv.copy()
+        hit = rng.random(proj_uv.shape[:2]) < 0.3
+        proj_uv[hit] += rng.uniform(-80.0, 80.0, (int(hit.sum()), 2))
+    stripe = 2.0 if case == "stripes" else None
+    host = local_homographies(proj_uv, BOARD, centres, stripe=stripe)
+    twin = local_homographies(proj_uv, BOARD, centres, stripe=stripe, device=torch_cpu)
+    lost = np.isnan(host).all(axis=(1, 2))
+    np.testing.assert_array_equal(np.isnan(twin).all(axis=(1, 2)), lost)
+    assert (lost[5] and lost.sum() < BOARD.n_points) if case == "holes" else not lost.any()
+    moved = np.linalg.norm(points(twin, centres) - points(host, centres), axis=1)
+    assert np.nanmax(moved) < 1e-9  # rounding: the same inliers, the same formulas
+
+
+def test_torch_fit_batches_a_whole_pose_at_once(torch_cpu, monkeypatch):
+    uv, centres, cam2proj = synthetic_map()
+    calls = []
+    fit = windowfit.fit_windows
+    monkeypatch.setattr(projector, "fit_windows", lambda *a: calls.append(len(a[1])) or fit(*a))
+    twin = local_homographies(uv, BOARD, centres, device=torch_cpu)
+    assert calls == [BOARD.n_points]
+    assert np.max(np.abs(points(twin, centres) - truth(cam2proj, centres))) < EXACT_PX
+
+
+def test_linear_algebra_starts_on_a_device(torch_cpu):
+    # What the observers' thread runs on "cuda" before they start (pytorch/pytorch#90613).
+    arrayspace.start_linear_algebra(torch_cpu)

@@ -30,9 +30,13 @@ are points, not areas: no perspective bias) or, for the circles, calls
 
 from __future__ import annotations
 
+import math
+from typing import Any
+
 import cv2
 import numpy as np
 
+from virtus.calib.arrayspace import NUMPY, ArraySpace, space_of
 from virtus.calib.board import Board, CheckerBoard, CircleBoard
 from virtus.checks import as_points
 from virtus.errors import InputError
@@ -285,11 +289,13 @@ def _window_radii(board: CircleBoard) -> tuple[float, float]:
     return r_in, r_out
 
 
-def refine_points(image: np.ndarray, board: Board, points: np.ndarray) -> np.ndarray:
+def refine_points(
+    image: np.ndarray, board: Board, points: np.ndarray, *, device: str | None = None
+) -> np.ndarray:
     """Sub-pixel positions of the board's points found by :func:`find_grid`.
 
-    Circle boards: :func:`refine_centres` (area centroids on ``image``). Checkerboards:
-    :func:`refine_corners` (saddle points).
+    Circle boards: :func:`refine_centres` (area centroids on ``image``; ``device`` is
+    its). Checkerboards: :func:`refine_corners` (saddle points, on the host).
 
     Returns
     -------
@@ -297,7 +303,7 @@ def refine_points(image: np.ndarray, board: Board, points: np.ndarray) -> np.nda
     """
     if isinstance(board, CheckerBoard):
         return refine_corners(image, points)
-    return refine_centres(image, board, points)
+    return refine_centres(image, board, points, device=device)
 
 
 def refine_corners(image: np.ndarray, corners: np.ndarray) -> np.ndarray:
@@ -354,7 +360,9 @@ def refine_corners(image: np.ndarray, corners: np.ndarray) -> np.ndarray:
     return out
 
 
-def refine_centres(image: np.ndarray, board: CircleBoard, centres: np.ndarray) -> np.ndarray:
+def refine_centres(
+    image: np.ndarray, board: CircleBoard, centres: np.ndarray, *, device: str | None = None
+) -> np.ndarray:
     """Sub-pixel area centroids of the circles' images.
 
     Parameters
@@ -362,6 +370,9 @@ def refine_centres(image: np.ndarray, board: CircleBoard, centres: np.ndarray) -
     image : (H, W) uint8 or float camera image under uniform illumination.
     board : the board.
     centres : (R*C, 2) float64 approximate centres (u, v) px in board order.
+    device : None to work with numpy here; else a torch device (``"cuda"``, ``"cpu"``)
+        that gathers and reduces the windows (:mod:`virtus.calib.arrayspace`: the same
+        centroids to rounding; the homographies between passes stay on the host).
 
     Returns
     -------
@@ -377,7 +388,8 @@ def refine_centres(image: np.ndarray, board: CircleBoard, centres: np.ndarray) -
     three with a detected point 2.2-2.4 px off): centroids up to 0.009 px off the exact
     area centroids with one pass, 0.002 px with passes until settled.
     """
-    img = np.asarray(image, dtype=np.float64)
+    space = space_of(device)
+    img = space.asarray(np.asarray(image, dtype=np.float64))
     centres = as_points("centres", centres, 2)
     if len(centres) != board.n_points:
         raise InputError("centres", f"{board.n_points} points (one per circle)", len(centres))
@@ -385,7 +397,7 @@ def refine_centres(image: np.ndarray, board: CircleBoard, centres: np.ndarray) -
     H = fit_homography(obj, centres)  # noqa: N806  board (m) -> image (px)
     if H is None:
         raise InputError("centres", "circle centres of the board's grid", "degenerate points")
-    out = _centroids(img, board, centres, H)
+    out = _centroids(img, board, centres, H, space)
     for _ in range(_CENTROID_PASSES - 1):
         found = np.isfinite(out).all(axis=1)
         if found.sum() < 4:
@@ -393,7 +405,10 @@ def refine_centres(image: np.ndarray, board: CircleBoard, centres: np.ndarray) -
         H = fit_homography(obj[found], out[found])  # noqa: N806
         if H is None:
             break
-        previous, out = out, _centroids(img, board, np.where(found[:, None], out, centres), H)
+        previous, out = (
+            out,
+            _centroids(img, board, np.where(found[:, None], out, centres), H, space),
+        )
         if np.nanmax(np.abs(out - previous), initial=0.0) < _CENTROID_SETTLED_PX:
             break
     return out
@@ -402,18 +417,23 @@ def refine_centres(image: np.ndarray, board: CircleBoard, centres: np.ndarray) -
 #: Pixels (circles x window box) of :func:`_centroids` gathered at once: bounds the memory
 #: whatever the image and board size (a window larger than this is a batch of its own).
 _CENTROID_BATCH_PIXELS = 1 << 16
+#: The same on a torch device, where launches cost alike whatever their size: a pose's
+#: circles (~1.4e5 padded pixels at the paper's 960 px) are one batch.
+_DEVICE_CENTROID_BATCH_PIXELS = 1 << 21
 
 
 def _centroids(
-    img: np.ndarray,
+    img: Any,
     board: CircleBoard,
     centres: np.ndarray,
     H: np.ndarray,  # noqa: N803
+    space: ArraySpace = NUMPY,
 ) -> np.ndarray:
     """One pass of :func:`refine_centres` with windows placed by the homography ``H``: every
     circle's window gathered into padded batches and solved together (the background fits
     from batched 6 x 6 normal equations), as :func:`_centroids_per_circle` does circle by
-    circle (the same windows and rules; centroids equal to rounding, ~1e-10 px)."""
+    circle (the same windows and rules; centroids equal to rounding, ~1e-10 px). ``img``
+    (H, W) float64 is in ``space``, the rest and the (N, 2) result on the host."""
     obj = board.object_points[:, :2]
     r_in, r_out = _window_radii(board)
     lo, hi = circle_pixel_bounds(H, obj, r_out)
@@ -423,24 +443,24 @@ def _centroids(
     out = np.full_like(centres, np.nan)
     index = np.flatnonzero(fits)
     area = np.prod(hi[index] - lo[index] + 1, axis=1)
+    limit = _CENTROID_BATCH_PIXELS if space is NUMPY else _DEVICE_CENTROID_BATCH_PIXELS
     start = 0
     while start < len(index):  # batches of circles, at least one each
         stop = start + 1
-        while (
-            stop < len(index)
-            and area[start : stop + 1].max() * (stop + 1 - start) <= _CENTROID_BATCH_PIXELS
-        ):
+        while stop < len(index) and area[start : stop + 1].max() * (stop + 1 - start) <= limit:
             stop += 1
         batch = index[start:stop]
-        out[batch] = _centroid_batch(
-            img, board, centres[batch], obj[batch], H, lo[batch], hi[batch], (r_in, r_out)
+        found = _centroid_batch(
+            space, img, board, centres[batch], obj[batch], H, lo[batch], hi[batch], (r_in, r_out)
         )
+        out[batch] = space.to_host(found)
         start = stop
     return out
 
 
 def _centroid_batch(
-    img: np.ndarray,
+    space: ArraySpace,
+    img: Any,
     board: CircleBoard,
     centres: np.ndarray,
     obj: np.ndarray,
@@ -448,69 +468,73 @@ def _centroid_batch(
     lo: np.ndarray,
     hi: np.ndarray,
     radii: tuple[float, float],
-) -> np.ndarray:
+) -> Any:
     """Centroids (n, 2) of the circles ``obj`` (n, 2) m whose windows are the pixel boxes
     ``lo``..``hi`` (n, 2) inclusive (inside the image), NaN where a rule of
-    :func:`_centroids_per_circle` rejects the circle. The boxes are padded to one
-    (n, rows, columns) block; what depends on a pixel's column or row alone is computed
-    per column or row and broadcast."""
+    :func:`_centroids_per_circle` rejects the circle, in ``space`` (as ``img``; the other
+    arguments are on the host). The boxes are padded to one (n, rows, columns) block; what
+    depends on a pixel's column or row alone is computed per column or row and broadcast."""
+    xp = space.xp
     n = len(obj)
-    box_w, box_h = (hi - lo + 1).max(axis=0)
+    box_w, box_h = (int(size) for size in (hi - lo + 1).max(axis=0))
     shape = (n, box_h, box_w)
-    cols = lo[:, 0, None] + np.arange(box_w)  # (n, W) pixel columns of each box
-    rows = lo[:, 1, None] + np.arange(box_h)  # (n, H)
-    in_box = (cols <= hi[:, 0, None])[:, None, :] & (rows <= hi[:, 1, None])[:, :, None]
-    rho = _plane_distance(np.linalg.inv(H), cols, rows, obj)  # (n, H, W) board m
+    cols = space.asarray(lo[:, 0, None] + np.arange(box_w))  # (n, W) pixel columns of a box
+    rows = space.asarray(lo[:, 1, None] + np.arange(box_h))  # (n, H)
+    last = space.asarray(hi)
+    in_box = (cols <= last[:, 0, None])[:, None, :] & (rows <= last[:, 1, None])[:, :, None]
+    rho = _plane_distance(space, np.linalg.inv(H), cols, rows, obj)  # (n, H, W) board m
     inner = (in_box & (rho <= radii[0])).reshape(n, -1)
     ring = (in_box & (rho > radii[0]) & (rho <= radii[1])).reshape(n, -1)
-    rows_in, cols_in = np.minimum(rows, img.shape[0] - 1), np.minimum(cols, img.shape[1] - 1)
+    rows_in, cols_in = rows.clip(max=img.shape[0] - 1), cols.clip(max=img.shape[1] - 1)
     values = img[rows_in[:, :, None], cols_in[:, None, :]].reshape(n, -1)
     # Quadratic background in pixel offsets from the centre, scaled by the window's size
     # (the same fit, better conditioned normal equations): 1, du, dv, du^2, dv^2, du dv.
-    scale = 1.0 / np.maximum(hi - lo, 1).max(axis=1).astype(np.float64)
-    du = ((cols - centres[:, 0, None]) * scale[:, None])[:, None, :]
-    dv = ((rows - centres[:, 1, None]) * scale[:, None])[:, :, None]
-    design = np.empty((n, 6, box_h, box_w))
-    for term, value in enumerate((1.0, du, dv, du * du, dv * dv, du * dv)):
-        design[:, term] = np.broadcast_to(value, shape)
-    design = design.reshape(n, 6, -1)
+    scale = space.asarray(1.0 / np.maximum(hi - lo, 1).max(axis=1).astype(np.float64))
+    centre = space.asarray(centres)
+    du = ((space.float64(cols) - centre[:, 0, None]) * scale[:, None])[:, None, :]
+    dv = ((space.float64(rows) - centre[:, 1, None]) * scale[:, None])[:, :, None]
+    terms = (space.full(shape, 1.0), du, dv, du * du, dv * dv, du * dv)
+    design = xp.stack([xp.broadcast_to(term, shape) for term in terms], axis=1).reshape(n, 6, -1)
     weighted = design * ring[:, None, :]
     usable = ring.sum(axis=1) >= 12
-    coef = np.zeros((n, 6))
-    normal, rhs = weighted @ design.transpose(0, 2, 1), (weighted @ values[..., None])[..., 0]
+    coef = space.full((n, 6), 0.0)
+    normal, rhs = weighted @ design.swapaxes(1, 2), (weighted @ values[..., None])[..., 0]
     try:
-        coef[usable] = np.linalg.solve(normal[usable], rhs[usable][..., None])[..., 0]
-    except np.linalg.LinAlgError:  # a singular ring (never seen): least squares, one by one
-        for k in np.flatnonzero(usable):
-            coef[k] = np.linalg.lstsq(design[k][:, ring[k]].T, values[k][ring[k]], rcond=None)[0]
+        coef[usable] = xp.linalg.solve(normal[usable], rhs[usable][..., None])[..., 0]
+    except space.singular_error:  # a singular ring (never seen): least squares, one by one
+        host = [space.to_host(a) for a in (design, ring, values)]
+        for k in np.flatnonzero(space.to_host(usable)):
+            d, r, v = (a[k] for a in host)
+            coef[k] = space.asarray(np.linalg.lstsq(d[:, r].T, v[r], rcond=None)[0])
     background = (coef[:, None, :] @ design)[:, 0]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        top = np.where(inner, background, -np.inf).max(axis=1)
+    with space.quiet():
+        top = space.row_max(xp.where(inner, background, -math.inf))
         dim = (inner & (background <= 0.05 * top[:, None])).any(axis=1)
-        weight = np.where(inner, 1.0 - values / background, 0.0).reshape(shape)
+        weight = xp.where(inner, 1.0 - values / background, 0.0).reshape(shape)
     if board.light_features:
         weight = -weight
     total = weight.sum(axis=(1, 2))
     good = usable & ~dim & (total > 0) & inner.any(axis=1)
-    out = np.full((n, 2), np.nan)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    out = space.full((n, 2), math.nan)
+    with space.quiet():
         u = (weight.sum(axis=1) * cols).sum(axis=1) / total
         v = (weight.sum(axis=2) * rows).sum(axis=1) / total
-    out[good] = np.stack([u, v], axis=1)[good]
+    out[good] = xp.stack([u, v], axis=1)[good]
     return out
 
 
-def _plane_distance(
-    g: np.ndarray, cols: np.ndarray, rows: np.ndarray, obj: np.ndarray
-) -> np.ndarray:
+def _plane_distance(space: ArraySpace, g: np.ndarray, cols: Any, rows: Any, obj: np.ndarray) -> Any:
     """(n, H, W) board-plane distances (m) from the points ``obj`` (n, 2) of the pixels
-    ``(cols[i, w], rows[i, h])`` mapped by the camera px -> board homography ``g``."""
-    x = cols.astype(np.float64)[:, None, :]
-    y = rows.astype(np.float64)[:, :, None]
-    den = (g[2, 0] * x + g[2, 2]) + g[2, 1] * y
-    bx = ((g[0, 0] * x + g[0, 2]) + g[0, 1] * y) / den - obj[:, 0, None, None]
-    by = ((g[1, 0] * x + g[1, 2]) + g[1, 1] * y) / den - obj[:, 1, None, None]
-    return np.sqrt(bx * bx + by * by)
+    ``(cols[i, w], rows[i, h])`` (in ``space``) mapped by the camera px -> board
+    homography ``g`` (3, 3)."""
+    g = g.tolist()
+    x = space.float64(cols)[:, None, :]
+    y = space.float64(rows)[:, :, None]
+    centre = space.asarray(obj)
+    den = (g[2][0] * x + g[2][2]) + g[2][1] * y
+    bx = ((g[0][0] * x + g[0][2]) + g[0][1] * y) / den - centre[:, 0, None, None]
+    by = ((g[1][0] * x + g[1][2]) + g[1][1] * y) / den - centre[:, 1, None, None]
+    return space.xp.sqrt(bx * bx + by * by)
 
 
 def _centroids_per_circle(
@@ -518,10 +542,14 @@ def _centroids_per_circle(
     board: CircleBoard,
     centres: np.ndarray,
     H: np.ndarray,  # noqa: N803
+    space: ArraySpace = NUMPY,
 ) -> np.ndarray:
     """One pass of :func:`refine_centres` with windows placed by the homography ``H``, one
     circle at a time (a least-squares background per circle): the reference that the
-    batched :func:`_centroids` is tested and benchmarked against."""
+    batched :func:`_centroids` is tested and benchmarked against, on the host alone
+    (``space`` is :func:`_centroids`'s, for a stand-in, and must be numpy's)."""
+    if space is not NUMPY:
+        raise ValueError("the per-circle centroids run on numpy arrays only")
     obj = board.object_points[:, :2]
     H_inv = np.linalg.inv(H)  # noqa: N806
     r_in, r_out = _window_radii(board)

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from virtus.calib.arrayspace import start_linear_algebra
 from virtus.calib.board import Board
 from virtus.calib.detect import find_grid, refine_points
 from virtus.calib.projector import local_homographies
@@ -22,7 +23,7 @@ from virtus.calib.solve import PoseObservation
 from virtus.capture.capture import Capture
 from virtus.errors import InputError
 
-__all__ = ["check_sequence", "observe_arrays", "observe_pose", "uniform_image"]
+__all__ = ["check_sequence", "fit_device", "observe_arrays", "observe_pose", "uniform_image"]
 
 
 def check_sequence(sequence: Any) -> None:
@@ -120,15 +121,40 @@ def observe_arrays(
     name: str,
     *,
     stripe: float | None = None,
+    device: str | None = None,
 ) -> PoseObservation:
     """:func:`observe_pose` from what it reads of a pose: the decoded projector coordinates
     (H, W, 2) px, the phase background (H, W) (:func:`uniform_image`) and the white frame
     (H, W), or None to detect on the background; ``stripe``: the widest stripe (projector
     px) of a direction decoded from a code alone, None without one
-    (:func:`~virtus.calib.projector.local_homographies`)."""
+    (:func:`~virtus.calib.projector.local_homographies`); ``device``: where the circles'
+    centroids and the local homographies are computed (:func:`fit_device`; None: numpy
+    here). Detection (OpenCV) is on the host."""
     centres = find_grid(background if white is None else white, board)
     if centres is None:
         return PoseObservation(name, None, None)
-    centroids = refine_points(background, board, centres)
-    homographies = local_homographies(proj_uv, board, centres, stripe=stripe)
+    centroids = refine_points(background, board, centres, device=device)
+    homographies = local_homographies(proj_uv, board, centres, stripe=stripe, device=device)
     return PoseObservation(name, centroids, homographies)
+
+
+def fit_device(on_gpu: bool) -> str | None:
+    """Where a calibration whose poses are rendered on a GPU (``on_gpu``) computes their
+    circles' centroids and local homographies: ``"cuda"`` when torch is installed and sees
+    a CUDA device, else None (numpy on the host, as always without a GPU).
+
+    Both are elementwise work over every padded window pixel (~5e5 a pose at the paper's
+    960 px), about two thirds of a pose's observation on a CPU core; on the device they
+    leave the host's cores to detection (``benchmarks/bench_calibrate.py``). The results
+    differ from the host's by rounding (centroids and projector points ~1e-12 px).
+    """
+    if not on_gpu:
+        return None
+    try:
+        import torch
+    except ImportError:
+        return None
+    if not torch.cuda.is_available():
+        return None
+    start_linear_algebra("cuda")  # here, before the observer threads
+    return "cuda"

@@ -79,26 +79,26 @@ def observers(processes: int | None) -> Observers:
     return Observers("here", 0) if processes == 0 else Observers("processes", processes)
 
 
-def observe_timed(*arguments: Any) -> tuple[PoseObservation, float]:
+def observe_timed(*arguments: Any, **options: Any) -> tuple[PoseObservation, float]:
     """:func:`~virtus.calib.observe.observe_arrays` and the seconds it took (in a worker
     thread, a worker process or here)."""
     start = time.perf_counter()
-    return observe_arrays(*arguments), time.perf_counter() - start
+    return observe_arrays(*arguments, **options), time.perf_counter() - start
 
 
 class _Here:
     """An executor that runs each submitted call at once, here (``submit`` returns a done
     :class:`~concurrent.futures.Future`)."""
 
-    def submit(self, function: Callable, *arguments: Any) -> Future:
+    def submit(self, function: Callable, *arguments: Any, **options: Any) -> Future:
         future: Future = Future()
-        future.set_result(function(*arguments))
+        future.set_result(function(*arguments, **options))
         return future
 
 
 @contextlib.contextmanager
 def observer_pool(chosen: Observers) -> Iterator[Any]:
-    """An executor (``submit(function, *arguments) -> Future``) of the ``chosen``
+    """An executor (``submit(function, *arguments, **options) -> Future``) of the ``chosen``
     observers; the workers end with the block."""
     if chosen.kind == "here":
         yield _Here()

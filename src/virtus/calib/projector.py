@@ -20,13 +20,13 @@ from typing import Any
 import cv2
 import numpy as np
 
+from virtus.calib.arrayspace import ArraySpace, space_of
 from virtus.calib.board import CircleBoard
 from virtus.calib.detect import apply_homography, circle_pixel_bounds, fit_homography
+from virtus.calib.windowfit import MIN_PIXELS, MIN_VALID_FRACTION, fit_windows
 from virtus.checks import as_float_array, as_points, positive
 from virtus.errors import InputError
 
-#: A neighbourhood needs this fraction of valid decoded pixels, else the centre is NaN.
-MIN_VALID_FRACTION = 0.5
 #: RANSAC threshold (projector px) that rejects gross decoding errors before the LS fit;
 #: coordinates decoded from a code alone are stripe centres, off by up to half a stripe
 #: plus half a camera pixel's footprint, so there the threshold is the stripe width when
@@ -71,25 +71,25 @@ def projector_window_radii(board: CircleBoard, stripe: float | None = None) -> n
     return np.minimum(CODE_WINDOW_FRACTION * board.center_distance_m, 0.95 * to_edge)
 
 
-#: Pixels (circles x window box) gathered at once (a window larger than this is a batch
-#: of its own). Bounds the memory whatever the image and board size and keeps the batch
-#: in cache: measured on the paper's 960 px poses (2 cores), 2^14-2^16 pixels take 70-100
-#: ms a pose and 5-24 MB at peak, 2^18 100 ms and 94 MB, 2^20 100 ms and 119 MB (code
+#: Pixels (circles x window box) gathered at once on the host (a window larger than this is
+#: a batch of its own). Bounds the memory whatever the image and board size and keeps the
+#: batch in cache: measured on the paper's 960 px poses (2 cores), 2^14-2^16 pixels take
+#: 70-100 ms a pose and 5-24 MB at peak, 2^18 100 ms and 94 MB, 2^20 100 ms and 119 MB (code
 #: windows, 4x larger: 250-370 ms at 2^14-2^16, 600-700 ms at 2^20).
 _BATCH_PIXELS = 1 << 16
-#: Trimming rounds before the final inlier set (each: one batched fit, residuals, new set).
-_TRIM_ROUNDS = 8
-#: A round keeps residuals up to this multiple of the window's median residual (or the
-#: RANSAC threshold when larger), so gross decoding errors leave before the fit is trusted.
-_TRIM_MEDIANS = 3.0
-#: Gauss-Newton steps on the transfer error after the DLT (as ``cv2.findHomography``'s
-#: Levenberg-Marquardt refinement): on rendered 960 px boards the first step moves the
-#: projector points by up to 1e-4 px, a second by < 1e-6 px.
-_REFINE_STEPS = 1
+#: The same on a device, where every launch costs the same whatever its size: the paper's
+#: poses (~3.5e5 pixels in 91 windows, four times that for code windows) are one batch, at
+#: about 30 float64 arrays of that size at peak (~85 MB).
+_DEVICE_BATCH_PIXELS = 1 << 21
 
 
 def local_homographies(
-    proj_uv: np.ndarray, board: CircleBoard, cam_centres: np.ndarray, stripe: float | None = None
+    proj_uv: np.ndarray,
+    board: CircleBoard,
+    cam_centres: np.ndarray,
+    stripe: float | None = None,
+    *,
+    device: str | None = None,
 ) -> np.ndarray:
     """Fit one camera px -> projector px homography around every circle, all at once.
 
@@ -106,6 +106,9 @@ def local_homographies(
         OpenCV's Gray code, whose integer columns and rows the fit averages to sub-pixel
         points like a phase map's staircase; it sets the RANSAC threshold and the wider
         neighbourhoods of :func:`projector_window_radii`); None for phase.
+    device : None to fit with numpy here; else a torch device (``"cuda"``, ``"cpu"``) that
+        gathers and fits the windows (torch must be importable: the caller checks, as
+        :func:`virtus.calib.observe.fit_device` does).
 
     Returns
     -------
@@ -117,20 +120,20 @@ def local_homographies(
 
     Notes
     -----
-    Every window's pixels are gathered into one padded batch and fitted together (a
-    normalised DLT per window from one batched 9 x 9 eigen-decomposition, refined by
+    Every window's pixels are gathered into one padded batch and fitted together
+    (:func:`virtus.calib.windowfit.fit_windows`: a normalised DLT per window refined by
     Gauss-Newton on the transfer error): the same least-squares homography as
-    :func:`local_homographies_per_circle` (one ``cv2.findHomography`` per circle). Gross
-    decoding errors are trimmed instead of found by RANSAC: each round keeps the pixels
-    within :data:`_TRIM_MEDIANS` median residuals (at least the threshold) of the last
-    fit, affine first (it cannot bend towards gross errors as a DLT can), then projective,
-    and the final set is every pixel within the threshold of the last fit. Deterministic
-    (batches of :data:`_BATCH_PIXELS` change results by rounding only); on the paper's
-    rendered poses the projector points agree with the per-circle path to 1.2e-4 px, also
-    with 10-30 % of the pixels off by up to 80 px (``tests/calib/test_projector.py``), at
-    1.4-2x its speed on 2 cores (``benchmarks/bench_calibrate.py``).
+    :func:`local_homographies_per_circle` (one ``cv2.findHomography`` per circle), with
+    gross decoding errors trimmed instead of found by RANSAC. Deterministic (batches of
+    :data:`_BATCH_PIXELS` change results by rounding only, as does fitting on a device);
+    on the paper's rendered poses the projector points agree with the per-circle path to
+    1.2e-4 px, also with 10-30 % of the pixels off by up to 80 px
+    (``tests/calib/test_projector.py``), at 1.4-2x its speed on 2 cores
+    (``benchmarks/bench_calibrate.py``).
     """
     uv, anchors, threshold, H = _window_inputs(proj_uv, board, cam_centres, stripe)  # noqa: N806
+    space = space_of(device)
+    batch_pixels = _BATCH_PIXELS if device is None else _DEVICE_BATCH_PIXELS
     radii = projector_window_radii(board, stripe)
     boxes = _window_boxes(H, board.object_points[:, :2], radii, uv.shape[:2])
     out = np.full((len(anchors), 3, 3), np.nan)
@@ -138,17 +141,18 @@ def local_homographies(
     # Batches of windows of similar size (smallest first): less padding to the largest box.
     order = np.argsort(area, kind="stable")
     area = area[order]
+    uv_space = space.asarray(uv)
     start = 0
     while start < len(anchors):  # batches of circles, at least one each
         stop = start + 1
-        while stop < len(anchors) and area[stop] * (stop + 1 - start) <= _BATCH_PIXELS:
+        while stop < len(anchors) and area[stop] * (stop + 1 - start) <= batch_pixels:
             stop += 1
         index = order[start:stop]
         src, dst, valid, inside = _gather_windows(
-            uv, H, board.object_points[index, :2], radii[index], boxes[index]
+            space, uv_space, H, board.object_points[index, :2], radii[index], boxes[index]
         )
-        src -= anchors[index, None, :]  # offsets from the anchor: well conditioned
-        out[index] = _fit_windows(src, dst, valid, inside, threshold)
+        src = src - space.asarray(anchors[index, None, :])  # offsets: well conditioned
+        out[index] = space.to_host(fit_windows(space, src, dst, valid, inside, threshold))
         start = stop
     shift = np.tile(np.eye(3), (len(anchors), 1, 1))
     shift[:, :2, 2] = -anchors
@@ -187,252 +191,43 @@ def _window_boxes(
 
 
 def _gather_windows(
-    uv: np.ndarray,
+    space: ArraySpace,
+    uv: Any,
     H: np.ndarray,  # noqa: N803
     centres: np.ndarray,
     radii: np.ndarray,
     boxes: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The windows' pixels padded to one box: camera px (n, P, 2), decoded projector px
-    (n, P, 2) (0 where invalid), valid (n, P) (inside the window with a finite decode)
-    and inside (n, P) (inside the window and the image)."""
+) -> tuple[Any, Any, Any, Any]:
+    """The windows' pixels padded to one box, in ``space`` (``uv``, the (H, W, 2) map, is
+    there already; the rest is on the host): camera px (n, P, 2), decoded projector px
+    (n, P, 2) (0 where invalid), valid (n, P) (inside the window with a finite decode) and
+    inside (n, P) (inside the window and the image)."""
+    xp = space.xp
     size = (boxes[:, 1] - boxes[:, 0] + 1).clip(min=0)
     box_w, box_h = max(int(size[:, 0].max()), 1), max(int(size[:, 1].max()), 1)
     n = len(centres)
-    cols = boxes[:, 0, 0, None] + np.arange(box_w)  # (n, W): what depends on the column
-    rows = boxes[:, 0, 1, None] + np.arange(box_h)  # (n, H) or row alone is broadcast
-    in_box = (cols <= boxes[:, 1, 0, None])[:, None, :] & (rows <= boxes[:, 1, 1, None])[:, :, None]
-    x, y = cols[:, None, :].astype(np.float64), rows[:, :, None].astype(np.float64)
-    pix = np.empty((n, box_h, box_w, 2))
-    pix[..., 0], pix[..., 1] = x, y
-    # Back to the board plane (camera px -> m) to keep the pixels inside the circle.
-    g = np.linalg.inv(H)
-    den = g[2, 0] * x + g[2, 1] * y + g[2, 2]
-    du = (g[0, 0] * x + g[0, 1] * y + g[0, 2]) / den - centres[:, 0, None, None]
-    dv = (g[1, 0] * x + g[1, 1] * y + g[1, 2]) / den - centres[:, 1, None, None]
-    inside = (in_box & (du * du + dv * dv <= (radii * radii)[:, None, None])).reshape(n, -1)
     height, width = uv.shape[:2]
-    row_start = np.minimum(rows, height - 1) * width
-    flat = row_start[:, :, None] + np.minimum(cols, width - 1)[:, None, :]
-    pix, flat = pix.reshape(n, -1, 2), flat.reshape(n, -1)
-    target = np.take(uv.reshape(-1, 2), flat, axis=0)
-    valid = inside & np.isfinite(target).all(axis=-1)
+    # (n, W) what depends on the column, (n, H) on the row: broadcast, not tiled.
+    cols = space.asarray(boxes[:, 0, 0, None] + np.arange(box_w))
+    rows = space.asarray(boxes[:, 0, 1, None] + np.arange(box_h))
+    hi = space.asarray(boxes[:, 1])
+    in_box = (cols <= hi[:, 0, None])[:, None, :] & (rows <= hi[:, 1, None])[:, :, None]
+    x, y = space.float64(cols)[:, None, :], space.float64(rows)[:, :, None]
+    shape = (n, box_h, box_w)
+    pix = xp.stack([xp.broadcast_to(x, shape), xp.broadcast_to(y, shape)], axis=-1)
+    # Back to the board plane (camera px -> m) to keep the pixels inside the circle.
+    g = np.linalg.inv(H).tolist()
+    c = space.asarray(centres)
+    den = g[2][0] * x + g[2][1] * y + g[2][2]
+    du = (g[0][0] * x + g[0][1] * y + g[0][2]) / den - c[:, 0, None, None]
+    dv = (g[1][0] * x + g[1][1] * y + g[1][2]) / den - c[:, 1, None, None]
+    r2 = space.asarray(radii * radii)[:, None, None]
+    inside = (in_box & (du * du + dv * dv <= r2)).reshape(n, -1)
+    flat = rows.clip(max=height - 1)[:, :, None] * width + cols.clip(max=width - 1)[:, None, :]
+    target = uv.reshape(-1, 2)[flat.reshape(-1)].reshape(n, -1, 2)
+    valid = inside & xp.isfinite(target).all(axis=-1)
     target[~valid] = 0.0
-    return pix, target, valid, inside
-
-
-def _fit_windows(
-    src: np.ndarray, dst: np.ndarray, valid: np.ndarray, inside: np.ndarray, threshold: float
-) -> np.ndarray:
-    """(n, 3, 3) homographies src -> dst of padded windows (:func:`_gather_windows`), NaN
-    where fewer than ``max(MIN_VALID_FRACTION * inside, 16)`` pixels are valid or within
-    ``threshold`` px of the fit (trimmed as :func:`local_homographies` says).
-
-    Works in Hartley-normalised coordinates fixed by the valid pixels (the transfer error
-    there is the projector px error times the similarity's scale), where every round
-    reuses the same monomials of the camera pixels."""
-    need = np.maximum(MIN_VALID_FRACTION * inside.sum(axis=1), 16)
-    usable = valid.sum(axis=1) >= need
-    out = np.full((len(need), 3, 3), np.nan)
-    if not usable.any():
-        return out
-    src, dst, valid = src[usable], dst[usable], valid[usable]
-    t_src, t_dst = _normalising(src, valid), _normalising(dst, valid)
-    s = src @ t_src[:, :2, :2].transpose(0, 2, 1) + t_src[:, None, :2, 2]
-    d = dst @ t_dst[:, :2, :2].transpose(0, 2, 1) + t_dst[:, None, :2, 2]
-    limit_n = threshold * t_dst[:, 0, 0, None]  # the threshold in normalised units
-    x, y, u, v = s[..., 0], s[..., 1], d[..., 0], d[..., 1]
-    one = np.ones_like(x)
-    monomials = np.stack([x * x, x * y, x, y * y, y, one], axis=1)  # (n, 6, P)
-    targets = np.stack([one, u, v, u * u + v * v], axis=1)  # (n, 4, P)
-    keep = _trim(_affine, monomials, targets, s, d, valid, limit_n)
-    for last in range(_TRIM_ROUNDS, 0, -1):
-        hn = _dlt(monomials, targets, keep)
-        residual = _transfer_error(hn, s, d)
-        with np.errstate(invalid="ignore"):
-            within = valid & (residual <= limit_n)
-        if np.array_equal(within, keep):
-            break  # the fit of exactly its own inliers
-        residual[~valid] = np.nan
-        median = _row_medians(residual)
-        with np.errstate(invalid="ignore"):
-            trimmed = valid & (residual <= np.maximum(limit_n, _TRIM_MEDIANS * median))
-        if last == 1 or np.array_equal(trimmed, keep):
-            keep = within
-            hn = _dlt(monomials, targets, keep)
-            break
-        keep = trimmed
-    hn = _gauss_newton(hn, monomials, s, d, keep)
-    fitted = np.linalg.solve(t_dst, hn @ t_src)  # denormalised
-    with np.errstate(all="ignore"):
-        fitted /= fitted[:, 2:3, 2:3]
-    bad = (keep.sum(axis=1) < need[usable]) | ~np.isfinite(fitted).all(axis=(1, 2))
-    fitted[bad] = np.nan
-    out[usable] = fitted
-    return out
-
-
-def _trim(
-    fit: Any,
-    monomials: np.ndarray,
-    targets: np.ndarray,
-    src: np.ndarray,
-    dst: np.ndarray,
-    valid: np.ndarray,
-    limit: np.ndarray,
-) -> np.ndarray:
-    """(n, P) pixels kept by trimming rounds of ``fit`` (:func:`_affine`): each keeps the
-    valid pixels within ``max(limit, _TRIM_MEDIANS * median residual)`` of the last fit,
-    until the set stops changing (at most :data:`_TRIM_ROUNDS`). An affine map cannot bend
-    to gross errors as a DLT of them can, so it trims them first."""
-    keep = valid
-    for _ in range(_TRIM_ROUNDS):
-        residual = _transfer_error(fit(monomials, targets, keep), src, dst)
-        with np.errstate(invalid="ignore"):
-            if not (valid & ~(residual <= limit)).any():
-                return valid  # every pixel within the threshold: nothing to trim
-        residual[~valid] = np.nan
-        median = _row_medians(residual)
-        with np.errstate(invalid="ignore"):
-            trimmed = valid & (residual <= np.maximum(limit, _TRIM_MEDIANS * median))
-        if np.array_equal(trimmed, keep):
-            break
-        keep = trimmed
-    return keep
-
-
-def _row_medians(residual: np.ndarray) -> np.ndarray:
-    """(n, 1) medians of the non-NaN residuals of each row of (n, P), NaN for a row of NaN
-    only (an all-NaN, degenerate fit). Without ``np.nanmedian``'s warning for such rows,
-    whose silencing (``warnings.catch_warnings``) is not thread-safe: windows are fitted
-    in observer threads (:mod:`virtus.calib.observers`)."""
-    median = np.full((len(residual), 1), np.nan)
-    some = ~np.isnan(residual).all(axis=1)
-    if some.any():
-        median[some, 0] = np.nanmedian(residual[some], axis=1)
-    return median
-
-
-def _affine(monomials: np.ndarray, targets: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) least-squares affine maps (NaN where singular) of the point sets of
-    :func:`_dlt`'s arguments."""
-    w = weights.astype(np.float64)
-    blocks = _outer_blocks(targets[:, :3] * w[:, None], monomials)  # sums m m^T, u m, v m
-    rhs = np.stack([blocks[:, 1, :, 2], blocks[:, 2, :, 2]], axis=-1)  # (n, 3, 2)
-    out = np.full((len(w), 3, 3), np.nan)
-    out[:, 2] = (0.0, 0.0, 1.0)
-    normal = blocks[:, 0]
-    solvable = np.linalg.cond(normal) < 1e12
-    out[solvable, :2] = np.linalg.solve(normal[solvable], rhs[solvable]).transpose(0, 2, 1)
-    return out
-
-
-def _normalising(points: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) similarities moving each padded set's (n, P, 2) weighted centroid to 0 and
-    its RMS distance from it to sqrt(2) (Hartley's normalisation)."""
-    w = weights.astype(np.float64)
-    count = np.maximum(w.sum(axis=1), 1.0)
-    mean = np.einsum("np,npk->nk", w, points) / count[:, None]
-    spread = np.einsum("np,npk,npk->n", w, points, points) / count - np.sum(mean * mean, axis=1)
-    scale = np.sqrt(2.0) / np.where(spread > 0, np.sqrt(np.maximum(spread, 0.0)), 1.0)
-    T = np.zeros((len(points), 3, 3))  # noqa: N806
-    T[:, 0, 0] = T[:, 1, 1] = scale
-    T[:, :2, 2] = -scale[:, None] * mean
-    T[:, 2, 2] = 1.0
-    return T
-
-
-def _outer_blocks(q: np.ndarray, monomials: np.ndarray) -> np.ndarray:
-    """(n, Q, 3, 3) weighted sums ``sum_p q[n, k, p] m m^T``, ``m = (x, y, 1)``, from the
-    monomials (n, 6, P) ``(x^2, xy, x, y^2, y, 1)`` by one batched product: the blocks of
-    the DLT and Gauss-Newton normal equations, without their (n, 2P, 9) design matrices."""
-    sums = q @ monomials.transpose(0, 2, 1)  # (n, Q, 6)
-    xx, xy, x1, yy, y1, one = np.moveaxis(sums, -1, 0)
-    rows = [np.stack(row, axis=-1) for row in ((xx, xy, x1), (xy, yy, y1), (x1, y1, one))]
-    return np.stack(rows, axis=-2)
-
-
-def _normal_matrix(blocks: np.ndarray) -> np.ndarray:
-    """(n, 9, 9) normal matrix of the rows ``(m, 0, -u m)`` and ``(0, m, -v m)`` from
-    :func:`_outer_blocks` of the weights ``(w, w u, w v, w (u^2 + v^2))``."""
-    plain, by_u, by_v, by_uv = (blocks[:, k] for k in range(4))
-    zero = np.zeros_like(plain)
-    return np.block([[plain, zero, -by_u], [zero, plain, -by_v], [-by_u, -by_v, by_uv]])
-
-
-def _dlt(monomials: np.ndarray, targets: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) DLT homographies (``H[2, 2] = 1``; NaN where degenerate or < 4 points) of
-    normalised point sets given by their monomials (n, 6, P) and targets (n, 4, P)
-    ``(1, u, v, u^2 + v^2)``, each point weighted by ``weights`` (n, P): the eigenvector
-    of the smallest eigenvalue of the 9 x 9 normal matrix."""
-    w = weights.astype(np.float64)
-    values, vectors = np.linalg.eigh(_normal_matrix(_outer_blocks(targets * w[:, None], monomials)))
-    H = vectors[..., 0].reshape(-1, 3, 3)  # noqa: N806
-    with np.errstate(all="ignore"):
-        H = H / H[:, 2:3, 2:3]  # noqa: N806
-    degenerate = (w.sum(axis=1) < 4) | (values[:, 1] <= 1e-12 * values[:, -1])
-    H[degenerate | ~np.isfinite(H).all(axis=(1, 2))] = np.nan
-    return H
-
-
-def _transfer_error(H: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:  # noqa: N803
-    """(n, P) distances between ``H`` (n, 3, 3) applied to src (n, P, 2) and dst."""
-    h = H.reshape(len(H), 9, 1)
-    x, y = src[..., 0], src[..., 1]
-    with np.errstate(all="ignore"):
-        inv = 1.0 / (h[:, 6] * x + h[:, 7] * y + h[:, 8])
-        du = (h[:, 0] * x + h[:, 1] * y + h[:, 2]) * inv - dst[..., 0]
-        dv = (h[:, 3] * x + h[:, 4] * y + h[:, 5]) * inv - dst[..., 1]
-        return np.sqrt(du * du + dv * dv)
-
-
-def _gauss_newton(
-    H: np.ndarray,  # noqa: N803
-    monomials: np.ndarray,
-    src: np.ndarray,
-    dst: np.ndarray,
-    weights: np.ndarray,
-) -> np.ndarray:
-    """:data:`_REFINE_STEPS` Gauss-Newton steps on the transfer error ``sum w |H(src) -
-    dst|^2`` over the 8 entries of each ``H`` (n, 3, 3) with ``H[2, 2] = 1`` (what
-    ``cv2.findHomography``'s Levenberg-Marquardt refinement minimises); NaN stays NaN."""
-    w = weights.astype(np.float64)
-    h = H.reshape(len(H), 9)[:, :8].copy()
-    ok = np.isfinite(h).all(axis=1)
-    h[~ok] = 0.0
-    x, y = src[..., 0], src[..., 1]
-    for _ in range(_REFINE_STEPS):
-        with np.errstate(all="ignore"):
-            inv = np.where(ok[:, None], 1.0 / (h[:, None, 6] * x + h[:, None, 7] * y + 1.0), 0.0)
-        u = (h[:, None, 0] * x + h[:, None, 1] * y + h[:, None, 2]) * inv
-        v = (h[:, None, 3] * x + h[:, None, 4] * y + h[:, None, 5]) * inv
-        r_u, r_v = u - dst[..., 0], v - dst[..., 1]
-        # Jacobian rows (m, 0, -u m) / den and (0, m, -v m) / den, m = (x, y, 1), without
-        # the fixed H[2, 2]: J^T J from w m m^T / den^2, J^T r from w r m / den.
-        w2, w1 = w * inv * inv, w * inv
-        q = np.stack(
-            [
-                w2,
-                w2 * u,
-                w2 * v,
-                w2 * (u * u + v * v),
-                w1 * r_u,
-                w1 * r_v,
-                w1 * (u * r_u + v * r_v),
-            ],
-            axis=1,
-        )
-        blocks = _outer_blocks(q, monomials)  # m m^T summed; its last column sums m
-        jtj = _normal_matrix(blocks[:, :4])[:, :8, :8]
-        jtr = np.concatenate([blocks[:, 4, :, 2], blocks[:, 5, :, 2], -blocks[:, 6, :2, 2]], 1)
-        jtj[~ok] = np.eye(8)
-        try:
-            h -= np.linalg.solve(jtj, jtr[..., None])[..., 0]
-        except np.linalg.LinAlgError:
-            break  # a singular system: keep the last estimate
-    out = np.concatenate([h, np.ones((len(h), 1))], axis=1).reshape(-1, 3, 3)
-    out[~ok] = np.nan
-    return out
+    return pix.reshape(n, -1, 2), target, valid, inside
 
 
 def local_homographies_per_circle(
@@ -465,7 +260,7 @@ def local_homographies_per_circle(
         inside = np.linalg.norm(apply_homography(H_inv, pix) - centre, axis=1) <= r_out
         target = uv[vv.ravel(), uu.ravel()]
         valid = inside & np.isfinite(target).all(axis=1)
-        need = max(MIN_VALID_FRACTION * inside.sum(), 16)
+        need = max(MIN_VALID_FRACTION * inside.sum(), MIN_PIXELS)
         if valid.sum() < need:
             continue
         # Offsets from the anchor keep the fit well conditioned.

@@ -71,7 +71,7 @@ import numpy as np
 
 from virtus.calib import conditioning, points, solve
 from virtus.calib.board import Board, board_from_dict, board_from_spec
-from virtus.calib.observe import check_sequence, observe_pose
+from virtus.calib.observe import check_sequence, fit_device, observe_pose
 from virtus.calib.observers import Observers, observe_timed, observer_pool, observers
 from virtus.calib.posefile import load_pose_observation, save_pose_arrays, save_pose_observation
 from virtus.calib.poses import BoardPose, check_pose, check_pose_spread, pose_set
@@ -334,10 +334,9 @@ def _run_episode(
     run: RunDirectory | None,
     chosen: Observers,
 ) -> CalibrationResult:
-    # One read-only float64 image for every pose: the scenes share it, and the renderer
-    # its texture.
-    texture = np.array(board_texture(board), dtype=np.float64)
-    texture.setflags(write=False)
+    # One read-only float64 image for every pose (and calibration): the scenes share it,
+    # and the renderer its texture.
+    texture = board_texture(board)
     digest = config_digest(episode)
     timing = {"render_s": 0.0, "observe_s": 0.0, "calibrate_s": 0.0}
     if run is not None:
@@ -347,10 +346,13 @@ def _run_episode(
         run.write_json(EPISODE_FILE, episode)
     observations: list[PoseObservation] = []
     # Poses are rendered and decoded here, one after the other (the renderer uses the whole
-    # device), and observed (detection, centroids, local homographies: CPU work) in worker
-    # threads (or processes) while the next poses render. Results are taken in pose order,
-    # so files, log and result are those of a sequential run.
+    # device), and observed (detection, centroids: CPU work; local homographies: on the
+    # host, or on the GPU that rendered) in worker threads (or processes) while the next
+    # poses render. Results are taken in pose order, so files, log and result are those of
+    # a sequential run. Spawned workers fit on the host (each would start a device context
+    # of its own).
     pending: collections.deque = collections.deque()
+    device = fit_device(scanner.renders_on_gpu) if chosen.kind != "processes" else None
 
     def finish_oldest() -> None:
         index, pose, seed, job = pending.popleft()
@@ -381,7 +383,8 @@ def _run_episode(
             start = time.perf_counter()
             arguments = (*_rendered_view(scanner, board, pose, texture, seed), board)
             timing["render_s"] += time.perf_counter() - start
-            pending.append((index, pose, seed, pool.submit(observe_timed, *arguments, pose.name)))
+            job = pool.submit(observe_timed, *arguments, pose.name, device=device)
+            pending.append((index, pose, seed, job))
             while len(pending) > chosen.in_flight:  # bounds the poses held in memory
                 finish_oldest()
         while pending:
