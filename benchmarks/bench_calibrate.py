@@ -160,12 +160,12 @@ def fit_on_host() -> Iterator[None]:
     poses render on a GPU (as before the third round of issue 25)."""
     from virtus.pipeline import calibrate
 
-    saved = calibrate.fit_device
-    calibrate.fit_device = lambda on_gpu: None
+    saved = calibrate.observation_device
+    calibrate.observation_device = lambda on_gpu: None
     try:
         yield
     finally:
-        calibrate.fit_device = saved
+        calibrate.observation_device = saved
 
 
 def compare_totals(board: str, repeat: int) -> dict[str, Any]:
@@ -173,11 +173,11 @@ def compare_totals(board: str, repeat: int) -> dict[str, Any]:
     local homographies fitted on the host ("host fit", only where a GPU renders: there they
     are fitted on it) and as now ("new"), alternating, ``repeat`` times each: wall, stages
     and RMS per run, and whether the files agree with the old ones."""
-    from virtus.calib.observe import fit_device
+    from virtus.calib.observe import observation_device
     from virtus.pipeline.calibrate import calibrate_rig
     from virtus.scanner import Scanner
 
-    device = fit_device(Scanner().renders_on_gpu)
+    device = observation_device(Scanner().renders_on_gpu)
     kinds = ["old", "host fit", "new"] if device is not None else ["old", "new"]
     runs: dict[str, list[dict[str, Any]]] = {kind: [] for kind in kinds}
     same_files = {kind: True for kind in kinds[1:]}
@@ -221,7 +221,7 @@ def compare_totals(board: str, repeat: int) -> dict[str, Any]:
     print("same calibration to 4 decimals:", all(rms[k] == rms["old"] for k in kinds))
     for kind in kinds[1:]:
         print(f"calibration.json of {kind} byte-identical to old in every pair:", same_files[kind])
-    return {**runs, "same_calibration_json": same_files, "fit_device": device}
+    return {**runs, "same_calibration_json": same_files, "observation_device": device}
 
 
 def _timed(function: Callable[[], Any], repeat: int) -> tuple[list[float], Any]:
@@ -251,7 +251,9 @@ def compare_parts(board_spec: str, n_poses: int, repeat: int) -> dict[str, Any]:
     first_set = _one_phase_set([i for i, kind in enumerate(kinds) if kind == "phase"])
     times: dict[str, dict[str, list[float]]] = {}
     worst = worst_centroid = device_worst = device_worst_centroid = 0.0
-    device, device_fit, device_centroids = observe.fit_device(scanner.renders_on_gpu), [], []
+    device = observe.observation_device(scanner.renders_on_gpu)
+    device_fit: list[float] = []
+    device_centroids: list[float] = []
     for index, pose in enumerate(pose_set("paper", scanner.rig, board, 1)[:n_poses]):
         capture = scanner.capture(board_scene(board, pose, texture), rng=index, command=[])
         frames = capture.frames[first_set]
@@ -340,7 +342,7 @@ def compare_observers(board_spec: str, n_poses: int, repeat: int) -> dict[str, A
     the CPUs, and the default), and spawned processes as before (start-up included, as
     in a calibration), alternating, ``repeat`` times each; and that they agree."""
     from virtus.calib.board import board_from_spec
-    from virtus.calib.observe import fit_device
+    from virtus.calib.observe import observation_device
     from virtus.calib.observers import Observers, observe_timed, observer_pool, observers
     from virtus.calib.poses import pose_set
     from virtus.calib.scene import board_scene, board_texture
@@ -357,7 +359,7 @@ def compare_observers(board_spec: str, n_poses: int, repeat: int) -> dict[str, A
     kinds += [(Observers("threads", k), None) for k in (2, 4, 8, 16) if k <= cpus]
     kinds += [(observers(None), None)] if (observers(None), None) not in kinds else []
     kinds += [(Observers("processes", max(processes_before(), 2)), None)]
-    device = fit_device(scanner.renders_on_gpu)
+    device = observation_device(scanner.renders_on_gpu)
     if device is not None:  # as a calibration rendered on a GPU observes
         kinds += [(Observers("threads", k), device) for k in (2, 4, 8) if k <= cpus]
     times: dict[str, list[float]] = {}

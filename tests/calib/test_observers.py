@@ -12,7 +12,7 @@ import pytest
 
 from tests.pipeline.test_calibrate_resume import quarter_rig
 from virtus.calib.board import board_from_spec
-from virtus.calib.observe import fit_device
+from virtus.calib.observe import observation_device
 from virtus.calib.observers import (
     MAX_OBSERVE_PROCESSES,
     MAX_OBSERVE_THREADS,
@@ -79,30 +79,31 @@ def test_threads_fitting_on_a_torch_device_observe_the_host_fits():
     np.testing.assert_allclose(device.homographies, host.homographies, rtol=1e-9, atol=1e-12)
 
 
-def test_fit_device_is_cuda_only_for_poses_rendered_on_a_gpu(monkeypatch):
+def test_observation_device_is_cuda_only_for_poses_rendered_on_a_gpu(monkeypatch):
     torch = pytest.importorskip("torch")
     from virtus.calib import observe
 
     started = []
     monkeypatch.setattr(observe, "start_linear_algebra", started.append)
     monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
-    assert fit_device(True) == "cuda" and fit_device(False) is None
+    assert observation_device(True) == "cuda" and observation_device(False) is None
     # torch's solvers are started on the device here, before any observer thread.
     assert started == ["cuda"]
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
-    assert fit_device(True) is None
+    assert observation_device(True) is None
     monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
     monkeypatch.setitem(sys.modules, "torch", None)  # torch not installed
-    assert fit_device(True) is None
+    assert observation_device(True) is None
 
 
 def test_a_calibration_on_a_gpu_fits_in_its_threads_on_the_device(monkeypatch):
-    # The pipeline passes fit_device's answer to every observing thread, and to no
+    # The pipeline passes observation_device's answer to every observing thread, and to no
     # spawned worker process.
     from virtus.pipeline import calibrate
 
     seen = []
-    monkeypatch.setattr(calibrate, "fit_device", lambda on_gpu: seen.append(on_gpu) or "cuda:7")
+    chosen = lambda on_gpu: seen.append(on_gpu) or "cuda:7"  # noqa: E731
+    monkeypatch.setattr(calibrate, "observation_device", chosen)
     devices = []
 
     class Recording:

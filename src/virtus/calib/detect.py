@@ -405,10 +405,8 @@ def refine_centres(
         H = fit_homography(obj[found], out[found])  # noqa: N806
         if H is None:
             break
-        previous, out = (
-            out,
-            _centroids(img, board, np.where(found[:, None], out, centres), H, space),
-        )
+        placed = np.where(found[:, None], out, centres)
+        previous, out = out, _centroids(img, board, placed, H, space)
         if np.nanmax(np.abs(out - previous), initial=0.0) < _CENTROID_SETTLED_PX:
             break
     return out

@@ -23,7 +23,13 @@ from virtus.calib.solve import PoseObservation
 from virtus.capture.capture import Capture
 from virtus.errors import InputError
 
-__all__ = ["check_sequence", "fit_device", "observe_arrays", "observe_pose", "uniform_image"]
+__all__ = [
+    "check_sequence",
+    "observation_device",
+    "observe_arrays",
+    "observe_pose",
+    "uniform_image",
+]
 
 
 def check_sequence(sequence: Any) -> None:
@@ -128,7 +134,7 @@ def observe_arrays(
     (H, W), or None to detect on the background; ``stripe``: the widest stripe (projector
     px) of a direction decoded from a code alone, None without one
     (:func:`~virtus.calib.projector.local_homographies`); ``device``: where the circles'
-    centroids and the local homographies are computed (:func:`fit_device`; None: numpy
+    centroids and the local homographies are computed (:func:`observation_device`; None: numpy
     here). Detection (OpenCV) is on the host."""
     centres = find_grid(background if white is None else white, board)
     if centres is None:
@@ -138,7 +144,7 @@ def observe_arrays(
     return PoseObservation(name, centroids, homographies)
 
 
-def fit_device(on_gpu: bool) -> str | None:
+def observation_device(on_gpu: bool) -> str | None:
     """Where a calibration whose poses are rendered on a GPU (``on_gpu``) computes their
     circles' centroids and local homographies: ``"cuda"`` when torch is installed and sees
     a CUDA device, else None (numpy on the host, as always without a GPU).

@@ -2,12 +2,14 @@
 processes, or one pose after the other here.
 
 Observing a pose (:func:`~virtus.calib.observe.observe_arrays`: circle detection,
-centroids, local homographies) is OpenCV and batched numpy work that releases the GIL, so
-threads observe poses side by side while the caller renders the next ones, sharing each
-pose's decode in place. Worker processes (spawned: a renderer's threads and device
-context are not forked) each start an interpreter and import virtus, and every pose's
-decode (~30 MB at 960 x 960 px) is pickled to them. Measured on 2 cores
-(``benchmarks/bench_calibrate.py``). The observations do not depend on the choice.
+centroids, local homographies) is OpenCV and batched numpy work that releases the GIL
+(the centroids and homographies batched on the GPU instead when the poses render there:
+:func:`~virtus.calib.observe.observation_device`), so threads observe poses side by side while the
+caller renders the next ones, sharing each pose's decode in place. Worker processes
+(spawned: a renderer's threads and device context are not forked) each start an
+interpreter and import virtus, every pose's decode (~30 MB at 960 x 960 px) is pickled to
+them, and they observe on the host. Measured on 2 cores (``benchmarks/bench_calibrate.py``).
+The observations do not depend on the choice (on the device: to rounding).
 """
 
 from __future__ import annotations

@@ -108,7 +108,7 @@ def local_homographies(
         neighbourhoods of :func:`projector_window_radii`); None for phase.
     device : None to fit with numpy here; else a torch device (``"cuda"``, ``"cpu"``) that
         gathers and fits the windows (torch must be importable: the caller checks, as
-        :func:`virtus.calib.observe.fit_device` does).
+        :func:`virtus.calib.observe.observation_device` does).
 
     Returns
     -------

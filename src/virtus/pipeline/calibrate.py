@@ -71,7 +71,7 @@ import numpy as np
 
 from virtus.calib import conditioning, points, solve
 from virtus.calib.board import Board, board_from_dict, board_from_spec
-from virtus.calib.observe import check_sequence, fit_device, observe_pose
+from virtus.calib.observe import check_sequence, observation_device, observe_pose
 from virtus.calib.observers import Observers, observe_timed, observer_pool, observers
 from virtus.calib.posefile import load_pose_observation, save_pose_arrays, save_pose_observation
 from virtus.calib.poses import BoardPose, check_pose, check_pose_spread, pose_set
@@ -352,7 +352,7 @@ def _run_episode(
     # a sequential run. Spawned workers fit on the host (each would start a device context
     # of its own).
     pending: collections.deque = collections.deque()
-    device = fit_device(scanner.renders_on_gpu) if chosen.kind != "processes" else None
+    device = observation_device(scanner.renders_on_gpu) if chosen.kind != "processes" else None
 
     def finish_oldest() -> None:
         index, pose, seed, job = pending.popleft()
