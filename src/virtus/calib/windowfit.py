@@ -89,10 +89,7 @@ def fit_windows(
             within = valid & (residual <= limit_n)
         if space.equal(within, keep):
             break  # the fit of exactly its own inliers
-        residual[~valid] = math.nan
-        median = _row_medians(space, residual)
-        with space.quiet():
-            trimmed = valid & (residual <= xp.maximum(limit_n, TRIM_MEDIANS * median))
+        trimmed = _trimmed(space, residual, valid, limit_n)
         if last == 1 or space.equal(trimmed, keep):
             keep = within
             hn = _dlt(space, monomials, targets, keep)
@@ -121,21 +118,27 @@ def _trim(
     within ``max(limit, TRIM_MEDIANS * median residual)`` of the last fit, until the set
     stops changing (at most :data:`TRIM_ROUNDS`). An affine map cannot bend to gross
     errors as a DLT of them can, so it trims them first."""
-    xp = space.xp
     keep = valid
     for _ in range(TRIM_ROUNDS):
         residual = _transfer_error(space, _affine(space, monomials, targets, keep), src, dst)
         with space.quiet():
             if not bool((valid & ~(residual <= limit)).any()):
                 return valid  # every pixel within the threshold: nothing to trim
-        residual[~valid] = math.nan
-        median = _row_medians(space, residual)
-        with space.quiet():
-            trimmed = valid & (residual <= xp.maximum(limit, TRIM_MEDIANS * median))
+        trimmed = _trimmed(space, residual, valid, limit)
         if space.equal(trimmed, keep):
             break
         keep = trimmed
     return keep
+
+
+def _trimmed(space: ArraySpace, residual: Any, valid: Any, limit: Any) -> Any:
+    """(n, P) the valid pixels whose ``residual`` (n, P) is within ``max(limit,``
+    :data:`TRIM_MEDIANS` ``x`` the window's median residual over its valid pixels``)``
+    (``limit`` (n, 1)): one trimming round. Writes NaN into ``residual`` where not valid."""
+    residual[~valid] = math.nan
+    median = _row_medians(space, residual)
+    with space.quiet():
+        return valid & (residual <= space.xp.maximum(limit, TRIM_MEDIANS * median))
 
 
 def _row_medians(space: ArraySpace, residual: Any) -> Any:
