@@ -609,10 +609,17 @@ def test_a_record_of_another_dataset_does_not_count_as_complete(mixed, tmp_path)
         assert not set(range(start, stop)) & set(store.samples())
 
 
-@pytest.mark.parametrize("spec", ["4x7", "checker:6x9,square_mm=30"])
-def test_calibration_mode_boards_are_textured_as_the_calibration_job_textures_them(spec) -> None:
+@pytest.mark.parametrize("spec", ["4x7", "checker:6x9,square_mm=10"])  # fits the tiny rig
+def test_calibration_mode_boards_are_textured_as_the_calibration_job_textures_them(
+    tmp_path, spec
+) -> None:
     from virtus.calib.board import board_from_spec
     from virtus.calib.scene import board_texture
-    from virtus.data.sampling import _board_texture
 
-    np.testing.assert_array_equal(_board_texture(spec), board_texture(board_from_spec(spec)))
+    extra = {"board": {"spec": spec}, "objects": {"sources": []},
+             "fringes": {"codings": ["gray"], "steps": [4], "periods": [16]}}  # fmt: skip
+    config = load_config(tiny_config(tmp_path, mode="calibration", num_samples=1, **extra))
+    objects, _ = Randomiser(config, tmp_path / "assets")._board(np.random.default_rng(0))
+    ((record, plane),) = objects
+    assert record.type == "board"
+    np.testing.assert_array_equal(plane.texture, board_texture(board_from_spec(spec)))

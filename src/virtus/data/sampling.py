@@ -533,10 +533,11 @@ class Randomiser:
     def _board(self, rng: np.random.Generator) -> tuple[list[tuple[ObjectRecord, Any]], dict]:
         """A circle board at a random pose inside both fields (calibration mode)."""
         from virtus.calib.poses import random_poses
-        from virtus.calib.scene import board_scene
+        from virtus.calib.scene import board_scene, board_texture
 
         pose = random_poses(self.rig, self.board, 1, rng)[0]
-        plane = board_scene(self.board, pose, _board_texture(self.config.board)).objects[0]
+        # The calibration job's texture (kept per board there), so boards look alike.
+        plane = board_scene(self.board, pose, board_texture(self.board)).objects[0]
         record = ObjectRecord(1, "board", "board", pose.board2cam, self.board.plane_size_m, {})
         return [(record, plane)], {
             "board": self.board.to_dict(),
@@ -547,16 +548,6 @@ class Randomiser:
         from virtus.scene.model import Scene
 
         return Scene(objects=tuple(obj for _, obj in objects), ambient=ambient)
-
-
-@functools.lru_cache(maxsize=4)
-def _board_texture(spec: str) -> np.ndarray:
-    """The board's albedo texture, as the calibration job renders it (a checkerboard's edges
-    softened as a checkerboard's, not a circle board's)."""
-    from virtus.calib.board import board_from_spec
-    from virtus.calib.scene import board_texture
-
-    return board_texture(board_from_spec(spec))
 
 
 @functools.lru_cache(maxsize=256)
