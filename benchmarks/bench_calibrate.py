@@ -12,20 +12,19 @@ was before the second round of issue 25 ("old": centroids refined circle by circ
 observed in spawned worker processes on hosts of 4+ CPUs and here on smaller ones, whole
 frames decoded on the host) against today's ("new": every circle's centroid window in one
 batch, poses observed in threads of this process, only the board's window decoded on the
-host, and where a GPU renders, the local homographies fitted on it) and, there, today's
-with the homographies fitted on the host ("host fit"), with the stages, the CPU seconds,
-the calibration's RMS to 4 decimals and whether ``calibration.json`` is byte-identical.
-Then the parts of one pose, old vs new (host decode of the whole frame; "frame/window":
-today's decode of the whole frame against that of the board's window; wrapped phase of
-one phase set; refined centroids; local homographies (and, where a GPU renders, the same
-fitted on it); whole observation; "old" is before issue 25 there: one
+host, and where a GPU renders, the circles' centroids and local homographies computed on
+it) and, there, today's observing on the host alone ("on host"), with the stages, the CPU
+seconds, the calibration's RMS to 4 decimals and whether ``calibration.json`` is
+byte-identical. Then the parts of one pose, old vs new (host decode of the whole frame;
+"frame/window": today's decode of the whole frame against that of the board's window;
+wrapped phase of one phase set; refined centroids and local homographies (and, where a
+GPU renders, both on it); whole observation; "old" is before issue 25 there: one
 ``cv2.findHomography`` RANSAC fit per circle, the wrapped phase on a float64 copy of the
 whole stack, per-circle centroids) on the first ``--parts-poses`` poses rendered on the
 host, with how far the old and new projector points and centroids are apart. Last, the
 observation alone of ``--observer-poses`` poses rendered and decoded once: here, in 2, 4,
-... threads and in spawned processes, and where a GPU renders in threads that fit the
-homographies on it (how observation scales with the host's cores, without the renderer
-beside it).
+... threads and in spawned processes, and where a GPU renders in threads that observe on
+it (how observation scales with the host's cores, without the renderer beside it).
 
     PYTHONPATH=src python benchmarks/bench_calibrate.py [--board 7x13] [--repeat 3]
         [--parts-poses 3] [--observer-poses 18] [--skip-cli] [--json out.json]
@@ -155,9 +154,9 @@ def cpu_seconds() -> float:
 
 
 @contextmanager
-def fit_on_host() -> Iterator[None]:
-    """Today's library call with the local homographies fitted on the host even when the
-    poses render on a GPU (as before the third round of issue 25)."""
+def observe_on_host() -> Iterator[None]:
+    """Today's library call with the centroids and local homographies computed on the host
+    even when the poses render on a GPU (as before the third round of issue 25)."""
     from virtus.pipeline import calibrate
 
     saved = calibrate.observation_device
@@ -170,22 +169,22 @@ def fit_on_host() -> Iterator[None]:
 
 def compare_totals(board: str, repeat: int) -> dict[str, Any]:
     """The library call as before the second round of issue 25 ("old"), as now with the
-    local homographies fitted on the host ("host fit", only where a GPU renders: there they
-    are fitted on it) and as now ("new"), alternating, ``repeat`` times each: wall, stages
+    centroids and local homographies on the host ("on host", only where a GPU renders: there
+    they are computed on it) and as now ("new"), alternating, ``repeat`` times each: wall, stages
     and RMS per run, and whether the files agree with the old ones."""
     from virtus.calib.observe import observation_device
     from virtus.pipeline.calibrate import calibrate_rig
     from virtus.scanner import Scanner
 
     device = observation_device(Scanner().renders_on_gpu)
-    kinds = ["old", "host fit", "new"] if device is not None else ["old", "new"]
+    kinds = ["old", "on host", "new"] if device is not None else ["old", "new"]
     runs: dict[str, list[dict[str, Any]]] = {kind: [] for kind in kinds}
     same_files = {kind: True for kind in kinds[1:]}
     with tempfile.TemporaryDirectory() as tmp:
         for index in range(repeat):
             for kind in kinds:
                 out = Path(tmp) / f"{kind}{index}"
-                variant = {"old": calibration_before, "host fit": fit_on_host}.get(kind)
+                variant = {"old": calibration_before, "on host": observe_on_host}.get(kind)
                 with variant() if variant else nullcontext(None) as processes:
                     start, cpu = time.perf_counter(), cpu_seconds()
                     result = calibrate_rig(Scanner(), board=board, out_dir=out, processes=processes)
@@ -201,7 +200,7 @@ def compare_totals(board: str, repeat: int) -> dict[str, Any]:
     print(
         f"\nold (per-circle centroids, observed {f'in {before} processes' if before else 'here'},"
         f" whole frames decoded) vs new (batched centroids, observed in threads, board window"
-        f" decoded{f', homographies fitted on {device}' if device else ''}), {repeat} runs "
+        f" decoded{f', centroids and homographies on {device}' if device else ''}), {repeat} runs "
         "each, alternating"
     )
     print(f"{'':<30}" + "".join(f" {kind:>17}" for kind in kinds) + f" {'old/new':>9}")
@@ -318,7 +317,7 @@ def compare_parts(board_spec: str, n_poses: int, repeat: int) -> dict[str, Any]:
     print(f"refined centroids, old - new: max {worst_centroid:.2e} px")
     if device_fit:
         print(
-            f"local homographies fitted on {device}: {spread(device_fit)} (new on the host: "
+            f"local homographies on {device}: {spread(device_fit)} (new on the host: "
             f"{spread(times['new']['local homographies'])}), points apart by at most "
             f"{device_worst:.2e} px"
         )
@@ -370,7 +369,7 @@ def compare_observers(board_spec: str, n_poses: int, repeat: int) -> dict[str, A
             with observer_pool(chosen) as pool:
                 jobs = [pool.submit(observe_timed, *view, device=on) for view in views]
                 found = [job.result()[0] for job in jobs]
-            label = f"{chosen.kind} {chosen.count}" + (f", fit on {on}" if on else "")
+            label = f"{chosen.kind} {chosen.count}" + (f", on {on}" if on else "")
             times.setdefault(label, []).append(time.perf_counter() - start)
             centroids = np.array([obs.cam_centroids for obs in found])
             reference = centroids if reference is None else reference
