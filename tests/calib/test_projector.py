@@ -5,13 +5,11 @@ replaced, on a rendered board and on maps built here from known homographies (se
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pytest
 
 from tests.pipeline.test_calibrate_resume import quarter_rig
-from virtus.calib import arrayspace, projector, windowfit
+from virtus.calib import projector, windowfit
 from virtus.calib.board import board_from_spec
 from virtus.calib.detect import find_grid
 from virtus.calib.poses import pose_set
@@ -142,34 +140,11 @@ def test_a_circle_without_enough_decoded_pixels_is_nan_in_both_fits():
     assert np.isnan(local_homographies(uv, BOARD, off_image)).all()
 
 
-def test_row_medians_of_degenerate_fits_are_nan_without_a_warning():
-    # Windows are fitted in observer threads, where silencing np.nanmedian's all-NaN
-    # warning with warnings.catch_warnings would race on the process's warning filters.
-    residual = np.array([[1.0, np.nan, 3.0, 2.0], [np.nan] * 4, [0.5, 0.5, np.nan, np.nan]])
-    filters = list(warnings.filters)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        median = windowfit._row_medians(arrayspace.NUMPY, residual)
-    np.testing.assert_array_equal(median, [[2.0], [np.nan], [0.5]])
-    assert warnings.filters == filters
-
-
 @pytest.fixture(scope="module")
 def torch_cpu() -> str:
     """The torch device of the fit's CPU twin (a CUDA device fits with the same code)."""
     pytest.importorskip("torch")
     return "cpu"
-
-
-def test_torch_row_medians_are_numpys_nanmedian(torch_cpu):
-    import torch
-
-    residual = np.array([[1.0, np.nan, 3.0, 2.0], [np.nan] * 4, [0.5, 0.7, np.nan, np.nan]])
-    space = arrayspace.torch_space(torch_cpu)
-    median = windowfit._row_medians(space, torch.as_tensor(residual))
-    # The mean of the two middle values for an even count, as np.nanmedian (torch's own
-    # nanmedian takes the lower one).
-    np.testing.assert_array_equal(median.numpy(), [[2.0], [np.nan], [0.6]])
 
 
 @pytest.mark.parametrize("case", ["rendered", "corrupted", "stripes", "holes"])
@@ -206,8 +181,3 @@ def test_torch_fit_batches_a_whole_pose_at_once(torch_cpu, monkeypatch):
     twin = local_homographies(uv, BOARD, centres, device=torch_cpu)
     assert calls == [BOARD.n_points]
     assert np.max(np.abs(points(twin, centres) - truth(cam2proj, centres))) < EXACT_PX
-
-
-def test_linear_algebra_starts_on_a_device(torch_cpu):
-    # What the observers' thread runs on "cuda" before they start (pytorch/pytorch#90613).
-    arrayspace.start_linear_algebra(torch_cpu)
