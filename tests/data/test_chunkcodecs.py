@@ -278,7 +278,7 @@ def fake_nvcomp(monkeypatch):
     monkeypatch.delenv(codecs.FAKE_NVCOMP_ENV, raising=False)
     monkeypatch.setitem(sys.modules, "nvidia", types.SimpleNamespace(nvcomp=_FakeNvcomp))
     monkeypatch.setitem(sys.modules, "nvidia.nvcomp", _FakeNvcomp)
-    monkeypatch.setattr(codecs, "_cuda_torch", lambda: None)  # the host-shuffle path
+    monkeypatch.setattr(codecs, "_staging_torch", lambda: (None, None))  # the host-shuffle path
     monkeypatch.setattr(codecs, "host_copier", lambda: None)  # nvCOMP's own copies
     monkeypatch.setattr(codecs, "_PROCESS_COMPRESSOR", {})  # none made before counts
     return _FakeNvcomp
@@ -312,6 +312,34 @@ def test_the_nvcomp_flow_gives_the_cpu_twins_bytes(fake_nvcomp, monkeypatch, dri
         assert [bytes(c) for c in ours] == theirs
     assert copier.copies == (3 if driver_copies else 0)
     assert gpu.encode_chunks([], []) == []
+
+
+def test_the_nvcomp_flow_compresses_device_chunks_as_host_ones(fake_nvcomp, monkeypatch) -> None:
+    """With torch staging the chunks (torch's CPU standing in for the GPU), chunks the
+    device already holds (any dtype of the same bytes) give the host chunks' bytes, as the
+    twin compresses them; a device chunk of another size, or device chunks without torch,
+    are refused."""
+    import torch
+
+    monkeypatch.setattr(codecs, "_staging_torch", lambda: (torch, "cpu"))
+    gpu = codecs.NvcompZstdFrames(piece_bytes=1008)
+    assert gpu.torch_device == "cpu"
+    twin = codecs.CpuZstdFrames(piece_bytes=1008)
+    arrays = [fringe_like(d, seed=7) for d in DTYPES]
+    chunks = [a.reshape(-1).view(np.uint8) for a in arrays]
+    sizes = [a.dtype.itemsize for a in arrays]
+    twins = {"uint16": np.int16}  # torch has no general uint16 (the device buffers' dtype)
+    device = [torch.from_numpy(a.view(twins.get(a.dtype.name, a.dtype)).copy()) for a in arrays]
+    expected = [bytes(c) for c in twin.encode_chunks(chunks, sizes)]
+    assert [bytes(c) for c in gpu.encode_chunks(chunks, sizes)] == expected  # torch staging
+    assert [bytes(c) for c in gpu.encode_chunks(chunks, sizes, device)] == expected
+    twin.torch_device = "cpu"
+    assert [bytes(c) for c in twin.encode_chunks(chunks, sizes, device)] == expected
+    with pytest.raises(ValueError, match="device chunk of"):
+        gpu.encode_chunks(chunks, sizes, [device[0][:-1], *device[1:]])
+    monkeypatch.setattr(codecs, "_staging_torch", lambda: (None, None))
+    with pytest.raises(ValueError, match="need torch"):
+        codecs.NvcompZstdFrames(piece_bytes=1008).encode_chunks(chunks, sizes, device)
 
 
 @pytest.mark.parametrize("driver_copies", [False, True])

@@ -12,10 +12,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
-from tests.data.test_dataset import tiny_config
+from tests.data.test_dataset import store_files, tiny_config
 from virtus.capture.capture import Capture
 from virtus.data import DatasetStore, generate, load_config
+from virtus.data import chunkcodecs as codecs
+from virtus.data.devicebuffers import device_shard_buffer
 from virtus.data.labels import array_layout, sample_arrays
 from virtus.data.labels_jit import device_sample_arrays
 from virtus.data.sampling import Randomiser
@@ -94,12 +97,23 @@ def test_device_labels_match_host_labels(tmp_path, llvm, changes) -> None:
         randomiser.max_frames, cam.height, cam.width, randomiser.bit_depth, config.label_dtype
     )
     checked_objects = 0
+    kept = device_shard_buffer(layout, 2, "cpu")  # torch's CPU stands in for the GPU
+    for tensor in kept.values():
+        tensor.view(torch.uint8).fill_(0x5A)  # every byte must be written
     for index in range(4):
         spec = randomiser.sample(index)
         rendering = spec.scanner.render_on_device(
             spec.scene, cam2world=spec.cam2world, rng=spec.capture_seed
         )
         device = device_sample_arrays(rendering, spec, layout)
+        # made in the device buffer and copied from it: the same arrays, on both sides
+        slot = {name: tensor[index % 2] for name, tensor in kept.items()}
+        through = device_sample_arrays(rendering, spec, layout, on_device=slot)
+        for array in layout:
+            name = array.name
+            np.testing.assert_array_equal(through[name], device[name], err_msg=name)
+            on_device = slot[name].reshape(-1).view(torch.uint8).numpy()
+            assert on_device.tobytes() == device[name].tobytes(), name
         host = sample_arrays(host_capture(spec, rendering), spec, layout)
         assert_close_labels(host, device, layout)
         valid = host["masks"][0]
@@ -160,3 +174,38 @@ def test_generate_labels_on_the_device_as_on_the_host(tmp_path, llvm, monkeypatc
     for index in device:
         for name, value in device[index].items():
             np.testing.assert_array_equal(again[index][name], value, err_msg=name)
+
+
+@pytest.mark.parametrize("pipelined", [True, False], ids=["pipelined", "shard by shard"])
+def test_the_gpu_compressor_reads_the_device_buffers(tmp_path, llvm, monkeypatch, pipelined):
+    """Labelled on the device and compressed on the GPU path (its CPU twin reading torch's
+    CPU tensors as nvCOMP reads CUDA ones): every batch comes from the device buffers, and
+    the store's chunk files are byte for byte those of the same run compressing the host's
+    copies."""
+    monkeypatch.setattr(generate_module, "LABELS_ON_DEVICE", True)
+    monkeypatch.setenv(codecs.FAKE_NVCOMP_ENV, "1")
+    monkeypatch.setattr(codecs, "_PROCESS_COMPRESSOR", {})
+    storage = {"shard_samples": 4, "codec": "shuffle-zstd", "compress_on": "gpu"}
+    config = load_config(tiny_config(tmp_path, num_samples=6, storage=storage))
+    if not pipelined:  # room for one shard in memory, not two: no pipeline
+        layout = generate_module._layout(config, tmp_path / "layout")[1]
+        monkeypatch.setattr(generate_module, "MAX_SHARD_BYTES", layout * 3 // 2)
+    from_device = []
+    encode = codecs.CpuZstdFrames.encode_chunks
+
+    def spy(self, chunks, sizes, on_device=None):
+        from_device.append(on_device is not None)
+        return encode(self, chunks, sizes, on_device)
+
+    monkeypatch.setattr(codecs.CpuZstdFrames, "encode_chunks", spy)
+    generate(config, tmp_path / "device")
+    assert from_device and all(from_device)
+    from_device.clear()
+    monkeypatch.setattr(generate_module, "staging_device", lambda *args: None)
+    generate(config, tmp_path / "host")
+    assert from_device and not any(from_device)
+    device, host = store_files(tmp_path / "device"), store_files(tmp_path / "host")
+    chunks = [name for name in device if "/c/" in name]
+    assert len(chunks) >= 13 * 2
+    assert {n: device[n] for n in chunks} == {n: host[n] for n in chunks}
+    assert DatasetStore.open(tmp_path / "device").verify().ok

@@ -272,8 +272,14 @@ class CpuZstdFrames:
         self._zstd = Zstd(level=level)
         self.piece_bytes = piece_bytes or PIECE_BYTES
         self.name = f"{cpu_encoder_name()} (zstd frames of {self.piece_bytes} bytes)"
+        #: The torch device whose tensors ``encode_chunks`` reads (None: host arrays only;
+        #: the testing hook :data:`FAKE_NVCOMP_ENV` sets ``"cpu"``).
+        self.torch_device: str | None = None
 
-    def encode_chunks(self, chunks: Sequence[np.ndarray], elementsizes: Sequence[int]) -> list:
+    def encode_chunks(
+        self, chunks: Sequence[np.ndarray], elementsizes: Sequence[int],
+        on_device: Sequence[Any] | None = None,
+    ) -> list:  # fmt: skip
         """The stored bytes of each chunk: staged, pieces cut and regrouped exactly as
         :class:`NvcompZstdFrames` does it on the host path, each piece compressed here.
 
@@ -281,14 +287,31 @@ class CpuZstdFrames:
         ----------
         chunks : (n_k,) uint8 arrays, a chunk's bytes each (little endian).
         elementsizes : byte-shuffle element size per chunk (<= 1: no shuffle).
+        on_device : the same chunks as torch tensors on :attr:`torch_device` (any dtype of
+            the same bytes): compressed instead of ``chunks`` (as the GPU's path does).
         """
         if not chunks:
             return []
+        if on_device is not None:
+            chunks = [np.asarray(_torch_bytes(t, raw.size).cpu()) for t, raw in
+                      zip(on_device, chunks, strict=True)]  # fmt: skip
         starts, pieces, end = staging_layout([raw.size for raw in chunks], self.piece_bytes)
         staging = np.empty(end, np.uint8)
         stage_on_host(chunks, elementsizes, starts, staging)
         frames = [self._zstd.encode(staging[o : o + n]) for o, n in pieces]
         return regroup(frames, [raw.size for raw in chunks], self.piece_bytes)
+
+
+def _torch_bytes(tensor: Any, size: int) -> Any:
+    """A torch tensor's bytes as a flat uint8 tensor of ``size`` bytes (ValueError when it
+    has another size: it is not the chunk it stands for)."""
+    import torch
+
+    flat = tensor.reshape(-1)
+    flat = flat.view(torch.uint8)  # bool and every other dtype: the same bytes
+    if flat.numel() != size:
+        raise ValueError(f"a device chunk of {flat.numel()} bytes for a chunk of {size}")
+    return flat
 
 
 def regroup(frames: Sequence[Any], sizes: Sequence[int], piece_bytes: int) -> list[bytes]:
@@ -368,7 +391,10 @@ class NvcompZstdFrames:
         self._local = threading.local()
         self._codec()  # fails here, not in the first shard, without a usable device
         self.name = f"nvcomp {self._nvcomp.__version__}"
-        self._torch = _cuda_torch()
+        #: torch and the device where the chunks are staged (a CUDA build of torch and
+        #: ``"cuda"``; (None, None) without one: staged on the host), whose tensors
+        #: :meth:`encode_chunks` also reads.
+        self._torch, self.torch_device = _staging_torch()
 
     def _codec(self) -> Any:
         """This thread's nvCOMP Zstd codec (RAW bitstream), made on first use."""
@@ -403,34 +429,47 @@ class NvcompZstdFrames:
         return buffer
 
     def _on_device(
-        self, chunks: Sequence[np.ndarray], sizes: Sequence[int], starts: list, end: int
-    ) -> Any:
-        """The chunks, shuffled where asked, at ``starts`` of one device buffer."""
+        self, chunks: Sequence[np.ndarray], sizes: Sequence[int], starts: list, end: int,
+        on_device: Sequence[Any] | None,
+    ) -> Any:  # fmt: skip
+        """The chunks, shuffled where asked, at ``starts`` of one device buffer (copied up
+        from the host, or from ``on_device`` where the device has them already)."""
         torch = self._torch
         if torch is None:
             staging = self._staging("host", end, lambda n: np.empty(n, np.uint8))
             stage_on_host(chunks, sizes, starts, staging)
             return self._nvcomp.as_array(staging[:end]).cuda()
         staging = self._staging(
-            "device", end, lambda n: torch.empty(n, dtype=torch.uint8, device="cuda")
+            "device", end, lambda n: torch.empty(n, dtype=torch.uint8, device=self.torch_device)
         )
-        for raw, size, start in zip(chunks, sizes, starts, strict=True):
-            source = torch.from_numpy(raw).to("cuda")
+        for k, (raw, size, start) in enumerate(zip(chunks, sizes, starts, strict=True)):
+            if on_device is None:
+                source = torch.from_numpy(raw).to(self.torch_device)
+            else:
+                source = _torch_bytes(on_device[k], raw.size)
             target = staging[start : start + raw.size]
             if size > 1:
                 target.view(size, -1).copy_(source.view(-1, size).t())
             else:
                 target.copy_(source)
-        torch.cuda.current_stream().synchronize()  # nvCOMP works on its own stream
+        if self.torch_device == "cuda":
+            torch.cuda.current_stream().synchronize()  # nvCOMP works on its own stream
         return staging[:end]
 
-    def encode_chunks(self, chunks: Sequence[np.ndarray], elementsizes: Sequence[int]) -> list:
-        """The stored bytes of each chunk (as :meth:`CpuZstdFrames.encode_chunks`)."""
+    def encode_chunks(
+        self, chunks: Sequence[np.ndarray], elementsizes: Sequence[int],
+        on_device: Sequence[Any] | None = None,
+    ) -> list:  # fmt: skip
+        """The stored bytes of each chunk (as :meth:`CpuZstdFrames.encode_chunks`);
+        ``on_device``: the same chunks as CUDA tensors (needs :attr:`torch_device`), read
+        there instead of copying ``chunks`` up."""
         if not chunks:
             return []
+        if on_device is not None and self._torch is None:
+            raise ValueError("device chunks need torch where the chunks are staged")
         starts, pieces, end = staging_layout([raw.size for raw in chunks], self.piece_bytes)
         self._codec()  # this thread's codec, frame slot size and copier
-        device = self._on_device(chunks, elementsizes, starts, end)
+        device = self._on_device(chunks, elementsizes, starts, end, on_device)
         lengths = [n for _, n in pieces]
         batch = self._nvcomp.as_arrays(device, [o for o, _ in pieces], lengths)
         frames = self._frames(batch, lengths)
@@ -487,14 +526,17 @@ def import_nvcomp() -> Any:
     return nvcomp
 
 
-def _cuda_torch() -> Any:
-    """torch when it is a CUDA build with a device here, else None (never required)."""
+def _staging_torch() -> tuple[Any, str | None]:
+    """``(torch, "cuda")`` when torch is a CUDA build with a device here, else
+    ``(None, None)`` (torch is never required)."""
     try:
         import torch
 
-        return torch if torch.cuda.is_available() else None
+        if torch.cuda.is_available():
+            return torch, "cuda"
     except Exception:  # not installed, or a build whose libraries do not load here
-        return None
+        pass
+    return None, None
 
 
 @dataclass(frozen=True)
@@ -582,10 +624,19 @@ def _gpu_factory() -> Any:
         def fake() -> CpuZstdFrames:
             twin = CpuZstdFrames()
             twin.name = f"fake-nvcomp ({twin.name})"
+            twin.torch_device = "cpu" if _torch_importable() else None
             return twin
 
         return fake
     return NvcompZstdFrames
+
+
+def _torch_importable() -> bool:
+    try:
+        import torch  # noqa: F401
+    except ImportError:
+        return False
+    return True
 
 
 def make_gpu_compressor(compress_on: str, codec: str) -> Any:
@@ -604,12 +655,14 @@ def make_gpu_compressor(compress_on: str, codec: str) -> Any:
 
 
 def encode_samples(
-    encoders: dict[str, Any], samples: Sequence[dict[str, np.ndarray]], compressor: Any
-) -> list[dict[str, Any]]:
+    encoders: dict[str, Any], samples: Sequence[dict[str, np.ndarray]], compressor: Any,
+    on_device: Sequence[dict[str, Any]] | None = None,
+) -> list[dict[str, Any]]:  # fmt: skip
     """Every stored chunk of ``samples`` (name -> array each): name -> bytes (None: only the
     fill value) per sample, for the arrays with a shard encoder
     (:class:`~virtus.data.shards.ShardEncoder`). The zstd ones in one batch of
-    ``compressor`` (:meth:`NvcompZstdFrames.encode_chunks`); the others, and all without a
+    ``compressor`` (:meth:`NvcompZstdFrames.encode_chunks`; from ``on_device``, the same
+    samples as tensors on its ``torch_device``, when given); the others, and all without a
     ``compressor``, by their own numcodecs codecs."""
     out: list[dict[str, Any]] = [{} for _ in samples]
     batch, places = [], []
@@ -626,7 +679,8 @@ def encode_samples(
                 batch.append((raw, encoder.shuffle))
                 places.append((k, name))
     if batch:
-        chunks = compressor.encode_chunks([b[0] for b in batch], [b[1] for b in batch])
+        device = None if on_device is None else [on_device[k][name] for k, name in places]
+        chunks = compressor.encode_chunks([b[0] for b in batch], [b[1] for b in batch], device)
         for (k, name), data in zip(places, chunks, strict=True):
             out[k][name] = data
     return out

@@ -59,6 +59,11 @@ from virtus.data.chunkcodecs import (
     plan_compression,
 )
 from virtus.data.config import MAX_SHARD_BYTES, MAX_WORKERS, DatasetConfig
+from virtus.data.devicebuffers import (
+    device_shard_buffer,
+    page_locked_shard_buffer,
+    staging_device,
+)
 from virtus.data.devices import Placement
 from virtus.data.labels import array_layout, sample_arrays
 from virtus.data.raycluster import (
@@ -102,13 +107,17 @@ TIMING_KEYS = ("render", "labels", "checksum", "compression", "io", "write", "wr
 _LABEL_QUEUE = 2
 #: Threads that label, checksum and compress rendered samples in a pipelined run.
 _SAMPLE_THREADS = 2
-#: In a worker process: the shard buffer kept between tasks (see :func:`_shard_buffer`).
+#: Whether this process is a dataset worker (:func:`_worker_init`).
 _IN_WORKER = False
 #: Where samples are labelled: None chooses the device that renders them on GPU variants
 #: and the host otherwise (:func:`_labels_on_device`); True or False forces one (the test
 #: suite checks the device path on the CPU's LLVM variant).
 LABELS_ON_DEVICE: bool | None = None
-_WORKER_BUFFER: tuple[tuple[str, str], dict[str, np.ndarray]] | None = None
+#: A shard's buffers: the host's (name -> (count, *shape) array) and, where the compressor
+#: reads the samples on the device, the device's (name -> torch tensor; else None).
+_Buffers = tuple[dict[str, np.ndarray], "dict[str, Any] | None"]
+#: In a worker process: the shard buffers kept between tasks (see :func:`_shard_buffers`).
+_WORKER_BUFFER: tuple[tuple[str, str], _Buffers] | None = None
 #: In a worker process: the CPU threads it may use to synthesise, checksum and compress
 #: (its share of the host's cores, :attr:`virtus.data.devices.Placement.threads`).
 _WORKER_THREADS: int | None = None
@@ -250,9 +259,12 @@ def _label_and_encode(
     return seconds, store.encode_sample(_slot(buffer, slot))
 
 
-def _encode(store: DatasetStore, buffer: dict[str, np.ndarray], slot: int) -> tuple[float, Any]:
-    """:func:`_label_and_encode` of a sample labelled already (on the device)."""
-    return 0.0, store.encode_sample(_slot(buffer, slot))
+def _encode(store: DatasetStore, buffers: _Buffers, slot: int) -> tuple[float, EncodedSample]:
+    """:func:`_label_and_encode` of a sample labelled already (on the device; the
+    compressor reads the device's copy where the buffers have one)."""
+    host, device = buffers
+    on_device = None if device is None else _slot(device, slot)
+    return 0.0, store.encode_sample(_slot(host, slot), on_device)
 
 
 def _labels_on_device() -> bool:
@@ -271,15 +283,17 @@ def _render_and_label(
     randomiser: Randomiser,
     index: int,
     threads: int | None,
-    buffer: dict[str, np.ndarray],
+    buffers: _Buffers,
     slot: int,
     on_device: bool,
 ) -> tuple[dict[str, Any], float, float]:
-    """Render sample ``index`` and write its arrays into slot ``slot`` of ``buffer``:
-    on the device that renders it (:func:`~virtus.data.labels_jit.device_sample_arrays`)
-    with ``on_device`` (:func:`_labels_on_device`), else on the host. Returns its metadata and the
-    ``render`` and ``labels`` seconds (device work is asynchronous: the labels' seconds
-    include the rendering the host waited for when copying)."""
+    """Render sample ``index`` and write its arrays into slot ``slot`` of the host buffer:
+    on the device that renders it (:func:`~virtus.data.labels_jit.device_sample_arrays`;
+    into the device buffer too, where there is one) with ``on_device``
+    (:func:`_labels_on_device`), else on the host. Returns its metadata and the ``render``
+    and ``labels`` seconds (device work is asynchronous: the labels' seconds include the
+    rendering the host waited for when copying)."""
+    buffer, device = buffers
     if not on_device:
         spec, capture, seconds = _render(randomiser, index, threads)
         labels = _label(store, spec, capture, buffer, slot)
@@ -292,7 +306,8 @@ def _render_and_label(
         spec.scene, cam2world=spec.cam2world, rng=spec.capture_seed
     )
     middle = time.perf_counter()
-    device_sample_arrays(rendering, spec, store.layout, _slot(buffer, slot))
+    on = None if device is None else _slot(device, slot)
+    device_sample_arrays(rendering, spec, store.layout, _slot(buffer, slot), on_device=on)
     return sample_meta(spec, rendering.metadata()), middle - begin, time.perf_counter() - middle
 
 
@@ -308,11 +323,11 @@ def _fill_shard(
     randomiser: Randomiser,
     shard: int,
     num_samples: int,
-    buffer: dict[str, np.ndarray],
+    buffers: _Buffers,
     on_sample: Callable[[], None] | None,
 ) -> tuple[list[dict[str, Any]], dict[str, float]]:
-    """Render and label a shard's samples into ``buffer`` (:meth:`DatasetStore.shard_buffer`,
-    slot ``k`` = the shard's ``k``-th sample). Returns their metadata and the seconds spent
+    """Render and label a shard's samples into ``buffers`` (:func:`_shard_buffers`, slot
+    ``k`` = the shard's ``k``-th sample). Returns their metadata and the seconds spent
     (``render``, ``labels``)."""
     start, stop = store.shard_bounds(shard, num_samples)
     threads = _synthesis_threads(randomiser)
@@ -321,7 +336,7 @@ def _fill_shard(
     metas = []
     for slot, index in enumerate(range(start, stop)):
         meta, render, labels = _render_and_label(
-            store, randomiser, index, threads, buffer, slot, on_device
+            store, randomiser, index, threads, buffers, slot, on_device
         )
         timing["render"] += render
         timing["labels"] += labels
@@ -338,17 +353,46 @@ def _open(path: str | Path, digest: str) -> tuple[DatasetStore, Randomiser]:
     return store, _randomiser(str(path), digest)
 
 
-def _shard_buffer(store: DatasetStore) -> dict[str, np.ndarray]:
-    """A shard buffer, kept from one task to the next in a worker process (fresh memory
-    costs page faults, and on a virtual machine often more: the host may have taken freed
-    pages back), new in any other process (nothing is held after :func:`generate`)."""
+def _staging_device(store: DatasetStore) -> str | None:
+    """Where this process keeps its samples for the compressor
+    (:func:`virtus.data.devicebuffers.staging_device`): the rendering device when samples
+    are labelled there and the store's batch compressor reads its tensors, else None."""
+    on_device = _labels_on_device()
+    if not on_device:
+        return None
+    from virtus.render.backend import on_gpu
+
+    rendering_device = "cuda" if on_gpu() else "cpu"
+    return staging_device(store.batch_compressor(), on_device, rendering_device)
+
+
+def _new_shard_buffers(store: DatasetStore) -> _Buffers:
+    """A shard's host buffer and, where the compressor reads the device's copy
+    (:func:`_staging_device`), its device buffer; the host buffer page-locked when that
+    device is a GPU (:mod:`virtus.data.devicebuffers`)."""
+    count, device = store.shard_samples, _staging_device(store)
+    if device is None:
+        return store.shard_buffer(count), None
+    host = (
+        page_locked_shard_buffer(store.layout, count)
+        if device == "cuda"
+        else store.shard_buffer(count)
+    )
+    return host, device_shard_buffer(store.layout, count, device)
+
+
+def _shard_buffers(store: DatasetStore) -> _Buffers:
+    """A shard's buffers (:func:`_new_shard_buffers`), kept from one task to the next in a
+    worker process (fresh memory costs page faults, and on a virtual machine often more:
+    the host may have taken freed pages back; page-locking costs more still), new in any
+    other process (nothing is held after :func:`generate`)."""
     global _WORKER_BUFFER
     if not _IN_WORKER:
-        return store.shard_buffer(store.shard_samples)
+        return _new_shard_buffers(store)
     key = (str(store.path), store.digest)
     if _WORKER_BUFFER is None or _WORKER_BUFFER[0] != key:
-        _WORKER_BUFFER = None  # the old one is freed before the new one is made
-        _WORKER_BUFFER = (key, store.shard_buffer(store.shard_samples))
+        _WORKER_BUFFER = None  # the old ones are freed before the new ones are made
+        _WORKER_BUFFER = (key, _new_shard_buffers(store))
     return _WORKER_BUFFER[1]
 
 
@@ -376,9 +420,11 @@ def render_shard(
     ``CUDA_VISIBLE_DEVICES``; None in the calling process and on CPU).
     """
     store, randomiser = _open(path, digest)
-    buffer = _shard_buffer(store)
-    metas, timing = _fill_shard(store, randomiser, shard, num_samples, buffer, on_sample)
-    result = _result(shard, metas, timing, store.write_shard(shard, buffer, metas), 0.0)
+    buffers = _shard_buffers(store)
+    metas, timing = _fill_shard(store, randomiser, shard, num_samples, buffers, on_sample)
+    buffer, device = buffers
+    write = store.write_shard(shard, buffer, metas, on_device=device)
+    result = _result(shard, metas, timing, write, 0.0)
     result["encoder"] = store.encoder_name()
     if _IN_WORKER:
         result["device"] = os.environ.get(_devices.CUDA_ENV) or None
@@ -438,7 +484,7 @@ def _run_pipelined(
     store, randomiser = _open(path, digest)
     threads = _synthesis_threads(randomiser)
     on_device = _labels_on_device()
-    buffers: list[dict[str, np.ndarray]] = []
+    buffers: list[_Buffers] = []
     writes: deque[tuple[Any, int, list[dict[str, Any]], dict[str, float]]] = deque()
     queue: deque[Any] = deque()  # sample futures not yet known to be done
     waited = 0.0
@@ -459,8 +505,9 @@ def _run_pipelined(
     ):
         for number, shard in enumerate(shards):
             if len(buffers) < 2:
-                buffers.append(store.shard_buffer(store.shard_samples))
-            buffer = buffers[number % 2]
+                buffers.append(_new_shard_buffers(store))
+            pair = buffers[number % 2]
+            buffer = pair[0]
             while len(writes) >= 2:  # the shard that last used this buffer is written first
                 yield finish()
             start, stop = store.shard_bounds(shard, num)
@@ -469,10 +516,10 @@ def _run_pipelined(
             for slot, index in enumerate(range(start, stop)):
                 if on_device:
                     meta, seconds, labels = _render_and_label(
-                        store, randomiser, index, threads, buffer, slot, True
+                        store, randomiser, index, threads, pair, slot, True
                     )
                     timing["labels"] += labels
-                    job = labeller.submit(_encode, store, buffer, slot)
+                    job = labeller.submit(_encode, store, pair, slot)
                 else:
                     spec, capture, seconds = _render(randomiser, index, threads)
                     meta = sample_meta(spec, capture.render)

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from virtus.data.devicebuffers import copy_to_host
 from virtus.data.labels import (
     DIRECTION_LABELS,
     DIRECTIONS,
@@ -38,9 +39,15 @@ from virtus.data.sampling import SampleSpec
 from virtus.errors import VirtusError
 from virtus.patterns import phase as _phase
 from virtus.render.jit.decode import FrameReader, wrap_phase, wrapped_phase_set
-from virtus.render.jit.tracing import to_host
+from virtus.render.jit.tracing import flat_array, to_host
 
 __all__ = ["device_sample_arrays"]
+
+
+#: One array (or one channel of it) to be made on the device: (name, channel or None, the
+#: device type it is converted to, its components (P,) each, whether they are stacked
+#: component-major, :func:`virtus.render.jit.tracing.flat_array`).
+_Copy = tuple[str, "int | None", Any, list[Any], bool]
 
 
 def device_sample_arrays(
@@ -48,6 +55,8 @@ def device_sample_arrays(
     spec: SampleSpec,
     layout: tuple[ArraySpec, ...],
     out: dict[str, np.ndarray] | None = None,
+    *,
+    on_device: dict[str, Any] | None = None,
 ) -> dict[str, np.ndarray]:
     """Every array of one sample (:mod:`virtus.data.labels`), computed on the device.
 
@@ -59,6 +68,11 @@ def device_sample_arrays(
     layout : the store's arrays (:func:`virtus.data.labels.array_layout`).
     out : name -> writable host array of the layout's per-sample shape and dtype (e.g. one
         sample's slot of a shard buffer); every element is written. Default: new arrays.
+    on_device : name -> torch tensor of the layout's per-sample shape on the rendering's
+        device (one slot of a :func:`virtus.data.devicebuffers.device_shard_buffer`): the
+        arrays are made there, in one evaluation, and each is then copied once into
+        ``out``; they stay for the GPU compressor. None: each array is copied to the host
+        as it is made.
 
     Returns
     -------
@@ -73,47 +87,84 @@ def device_sample_arrays(
     mi, dr = trace.modules()
     real = mi.Float if specs["depth"].dtype == "float32" else mi.Float64
     truth = trace.device_truth()
-    pixels = trace.n_pixels
-    reader = FrameReader(mi, dr, frames.data, pixels, specs["depth"].dtype)
-
+    reader = FrameReader(mi, dr, frames.data, trace.n_pixels, specs["depth"].dtype)
+    copies = _label_copies(mi, dr, real, reader, rendering, spec, truth)
+    if on_device is not None:
+        _make_on_device(mi, dr, copies, frames, specs, on_device)
+        copy_to_host(on_device, out)
+        return out
     frames_out = out["frames"]
     frames_out[: frames.n_frames] = frames.numpy()
     frames_out[frames.n_frames :] = 0
+    for name in DIRECTION_LABELS:
+        out[name].fill(specs[name].fill)
+    for name, channel, kind, components, stacked in copies:
+        target = out[name] if channel is None else out[name][channel]
+        host = to_host(components, kind, stacked=stacked)
+        np.copyto(target, host.reshape(target.shape), casting="unsafe")  # uint32 ids -> uint16
+    return out
 
-    saturated = dr.full(mi.Bool, False, pixels)
+
+def _label_copies(
+    mi: Any, dr: Any, real: Any, reader: FrameReader, rendering: Any, spec: SampleSpec,
+    truth: Any,
+) -> list[_Copy]:  # fmt: skip
+    """Every array of a sample but the frames, as device arrays still to be evaluated (the
+    direction labels only for the directions the sample's sequence has)."""
+    trace, frames = rendering.trace, rendering.frames
+    saturated = dr.full(mi.Bool, False, trace.n_pixels)
     for index in range(frames.n_frames):  # some frame at full scale (as the host's max)
         saturated |= reader.at_least(index, rendering.sensor.full_scale)
     planes = {
         "valid": truth.valid, "hit": truth.hit, "shadow": truth.shadow,
         "outside": truth.outside, "multibounce": trace.multibounce(), "saturated": saturated,
     }  # fmt: skip
-    _copy(mi.Bool, [planes[name] for name in MASKS], out["masks"], stacked=True)
-
-    _copy(real, [truth.points[2]], out["depth"])
-    _copy(real, list(truth.points), out["points"])
-    _copy(real, list(truth.normals), out["normals"])
-    _copy(real, list(truth.proj_uv), out["proj_uv"])
-
+    copies: list[_Copy] = [
+        ("masks", None, mi.Bool, [planes[name] for name in MASKS], True),
+        ("depth", None, real, [truth.points[2]], False),
+        ("points", None, real, list(truth.points), False),
+        ("normals", None, real, list(truth.normals), False),
+        ("proj_uv", None, real, list(truth.proj_uv), False),
+    ]
     sequence = spec.scanner.sequence
-    for name in DIRECTION_LABELS:
-        out[name].fill(specs[name].fill)
     for direction in sequence.directions:
         labels = _direction_labels(mi, dr, real, reader, sequence, truth, direction)
         channel = DIRECTIONS.index(direction)
         for name in DIRECTION_LABELS:
             kind = mi.Int32 if name == "order" else real
-            _copy(kind, [labels[name]], out[name][channel])
+            copies.append((name, channel, kind, [labels[name]], False))
+    copies.append(("object_id", None, mi.UInt32, [_object_ids(mi, dr, spec, truth)], False))
+    return copies
 
-    _copy(mi.UInt32, [_object_ids(mi, dr, spec, truth)], out["object_id"])
-    return out
 
+def _make_on_device(
+    mi: Any, dr: Any, copies: list[_Copy], frames: Any, specs: dict[str, ArraySpec],
+    on_device: dict[str, Any],
+) -> None:  # fmt: skip
+    """Evaluate ``copies`` in one launch and write them, with the frames, into the torch
+    tensors ``on_device`` (DLPack: no copy between Dr.Jit and torch). Masks cross as UInt8
+    and 32-bit unsigned values as Int32 (torch's dtypes; the same bytes once narrowed)."""
+    import torch
 
-def _copy(kind: Any, components: list[Any], target: np.ndarray, *, stacked: bool = False) -> None:
-    """Copy device arrays (P,) into a host array in one transfer: ``components`` are the
-    last axis of ``target`` (``(H, W, k)``), or its first with ``stacked`` (``(k, H, W)``),
-    converted to ``kind`` on the device."""
-    host = to_host(components, kind, stacked=stacked)
-    np.copyto(target, host.reshape(target.shape), casting="unsafe")  # uint32 ids -> uint16
+    as_torch = {mi.Bool: mi.UInt8, mi.UInt32: mi.Int32}
+    flats = [
+        flat_array(components, as_torch.get(kind, kind), stacked=stacked)
+        for _, _, kind, components, stacked in copies
+    ]
+    stored = frames.data if dr.type_v(frames.data) == dr.VarType.UInt8 else mi.Int32(frames.data)
+    dr.eval(stored, *flats)
+    dr.sync_thread()  # torch reads them on its own stream
+    frames_out = on_device["frames"]
+    count = frames.n_frames
+    frames_out[:count].copy_(torch.from_dlpack(stored).view(frames_out[:count].shape))
+    frames_out[count:] = 0
+    for name in DIRECTION_LABELS:
+        on_device[name].fill_(specs[name].fill)
+    for (name, channel, _, _, _), flat in zip(copies, flats, strict=True):
+        target = on_device[name] if channel is None else on_device[name][channel]
+        if target.dtype == torch.bool:
+            target = target.view(torch.uint8)
+        target.copy_(torch.from_dlpack(flat).view(target.shape))
 
 
 def _direction_labels(

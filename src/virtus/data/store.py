@@ -400,21 +400,26 @@ class DatasetStore:
         sample slot at a time, then :meth:`write_shard`; reusable for the next shard)."""
         return {a.name: np.empty((count, *a.shape), dtype=a.dtype) for a in self.layout}
 
-    def encode_sample(self, arrays: dict[str, np.ndarray]) -> EncodedSample:
+    def encode_sample(
+        self, arrays: dict[str, np.ndarray], on_device: dict[str, Any] | None = None
+    ) -> EncodedSample:
         """A sample's checksum and stored chunks, ahead of :meth:`write_shard` (so a pipeline
         can encode each sample as soon as it is labelled).
 
         Parameters
         ----------
         arrays : name -> the sample's array (layout shape and dtype).
+        on_device : the same arrays on the batch compressor's device, which it then reads
+            (:func:`virtus.data.devicebuffers.staging_device`); None: it reads ``arrays``.
         """
         begin = time.perf_counter()
         checksum = sample_checksum(arrays, self.layout)
         middle = time.perf_counter()
         chunks = {}
         if self.storage == "zarr":
-            encoders, batch = self._shard_encoders(), self._batch_compressor()
-            chunks = _codecs.encode_samples(encoders, [arrays], batch)[0]
+            encoders, batch = self._shard_encoders(), self.batch_compressor()
+            device = None if on_device is None else [on_device]
+            chunks = _codecs.encode_samples(encoders, [arrays], batch, device)[0]
         seconds = {"checksum": middle - begin, "compression": time.perf_counter() - middle}
         return EncodedSample(checksum, chunks, seconds)
 
@@ -424,6 +429,7 @@ class DatasetStore:
         arrays: dict[str, np.ndarray],
         metas: list[dict[str, Any]],
         encoded: list[EncodedSample] | None = None,
+        on_device: dict[str, Any] | None = None,
     ) -> dict[str, float]:
         """Write one shard's samples (consecutive, from the shard's first index), then its
         record. Each sample's ``checksum`` is added to its metadata.
@@ -436,6 +442,8 @@ class DatasetStore:
         metas : the ``n`` samples' metadata (:func:`virtus.data.generate.sample_meta`).
         encoded : the samples' :meth:`encode_sample` of ``arrays``, if already made (else
             checksums and chunks are computed here, on a few threads).
+        on_device : ``arrays`` on the batch compressor's device, which it then reads
+            (as :meth:`encode_sample`).
 
         Returns
         -------
@@ -477,9 +485,12 @@ class DatasetStore:
             io_start = time.perf_counter()
             if self.storage == "zarr":
                 encoders = self._shard_encoders()
-                batch = self._batch_compressor() if encoded is None else None
+                batch = self.batch_compressor() if encoded is None else None
                 if batch is not None:  # the shard's chunks in one batch, here (nvCOMP)
-                    done, seconds = _timed(_codecs.encode_samples, encoders, samples, batch)
+                    device = None
+                    if on_device is not None:
+                        device = [{n: a[k] for n, a in on_device.items()} for k in range(count)]
+                    done, seconds = _timed(_codecs.encode_samples, encoders, samples, batch, device)
                     timing["compression"] += seconds
                     encoded = [EncodedSample("", chunks, {}) for chunks in done]
                 chunks = {
@@ -709,13 +720,13 @@ class DatasetStore:
                 self._encoders_pid = os.getpid()
             return self._encoders
 
-    def _batch_compressor(self) -> Any:
+    def batch_compressor(self) -> Any:
         """This process's GPU batch compressor (None: numcodecs, chunk by chunk)."""
         return _codecs.process_compressor(self.description) if self.storage == "zarr" else None
 
     def encoder_name(self) -> str:
         """Who encodes this process's shards (``"nvcomp 6.0.0.12"``, ``"numcodecs ..."``)."""
-        return _codecs.encoder_name(self._batch_compressor(), self.storage)
+        return _codecs.encoder_name(self.batch_compressor(), self.storage)
 
     def add_encoders(self, encoders: list[str]) -> None:
         """Add the encoders that wrote a run's shards to ``dataset.json`` (under its lock)."""

@@ -41,7 +41,7 @@ from virtus.render.tracing import (
 )
 from virtus.scene.model import Scene
 
-__all__ = ["DeviceFrames", "DeviceTrace", "DeviceTruth", "to_host", "trace_device"]
+__all__ = ["DeviceFrames", "DeviceTrace", "DeviceTruth", "flat_array", "to_host", "trace_device"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -91,20 +91,24 @@ class DeviceTruth:
         )
 
 
-def to_host(components: list[Any], kind: Any, *, stacked: bool = False) -> np.ndarray:
-    """Device arrays (P,) each, converted to ``kind`` on the device, as one flat host array
-    from one transfer: pixel-major ``(P, k)`` (components interleaved), or with ``stacked``
-    component-major ``(k, P)``."""
+def flat_array(components: list[Any], kind: Any, *, stacked: bool = False) -> Any:
+    """Device arrays (P,) each, converted to ``kind`` on the device, as one flat device
+    array (not yet evaluated): pixel-major ``(P, k)`` (components interleaved), or with
+    ``stacked`` component-major ``(k, P)``."""
     mi, dr = _modules_of(components[0])
     count, pixels = len(components), dr.width(components[0])
     if count == 1:
-        flat = kind(components[0])
-    else:
-        flat = dr.zeros(kind, count * pixels)
-        index = dr.arange(mi.UInt32, pixels)
-        for k, component in enumerate(components):
-            dr.scatter(flat, kind(component), index + k * pixels if stacked else index * count + k)
-    return np.asarray(flat.numpy())
+        return kind(components[0])
+    flat = dr.zeros(kind, count * pixels)
+    index = dr.arange(mi.UInt32, pixels)
+    for k, component in enumerate(components):
+        dr.scatter(flat, kind(component), index + k * pixels if stacked else index * count + k)
+    return flat
+
+
+def to_host(components: list[Any], kind: Any, *, stacked: bool = False) -> np.ndarray:
+    """:func:`flat_array` as one flat host array, from one transfer."""
+    return np.asarray(flat_array(components, kind, stacked=stacked).numpy())
 
 
 @functools.lru_cache(maxsize=2)
