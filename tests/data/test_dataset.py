@@ -26,6 +26,7 @@ from virtus.data import DatasetConfig, DatasetStore, FringeDataset, generate, lo
 from virtus.data.export import export_webdataset
 from virtus.data.labels import DIRECTIONS, MASKS
 from virtus.data.sampling import Randomiser
+from virtus.data.store import MANIFEST_DIR
 from virtus.errors import InputError, VirtusError
 from virtus.geometry.devices import Camera, Projector, Rig, default_rig
 from virtus.geometry.optics import Intrinsics
@@ -364,6 +365,67 @@ def test_a_failed_sample_leaves_its_shard_unrecorded_and_the_rerun_completes(
     monkeypatch.setattr(generation, "sample_arrays", real)
     generate(config, tmp_path / "store", num=12)
     assert store_files(tmp_path / "store") == store_files(tmp_path / "reference")
+
+
+def test_worker_tasks_take_several_shards_then_one_as_the_queue_empties() -> None:
+    from collections import deque
+
+    from virtus.data.generate import _TASK_SHARDS, _next_task
+
+    queue, tasks = deque(range(180)), []
+    while queue:
+        tasks.append(_next_task(queue, 8))
+    assert [s for task in tasks for s in task] == list(range(180))  # all, in order
+    assert max(map(len, tasks)) == len(tasks[0]) == _TASK_SHARDS
+    assert [len(task) for task in tasks[-16:]] == [1] * 16  # one shard each at the end
+    assert _next_task(deque([5]), 8) == [5]
+
+
+def test_shards_written_while_the_next_renders_are_the_same_files(tmp_path, monkeypatch) -> None:
+    """A task of several shards, each written on a second thread while the next renders
+    (two sets of buffers), writes the files of one shard at a time; a failure is raised
+    after the shards before it are written, and leaves its own shard unrecorded."""
+    import importlib
+    import shutil
+
+    generation = importlib.import_module("virtus.data.generate")
+    config = load_config(tiny_config(tmp_path, storage={"shard_samples": 2}))
+    generate(config, tmp_path / "reference", num=12)
+    digest = DatasetStore.open(tmp_path / "reference").digest
+
+    def emptied() -> Path:  # the reference without its shards' files and records
+        path = tmp_path / "store"
+        shutil.rmtree(path, ignore_errors=True)
+        shutil.copytree(tmp_path / "reference", path)
+        for file in sorted(path.rglob("*")):
+            if file.is_file() and ("c" in file.relative_to(path).parts[1:2] or
+                                   file.parent.name == MANIFEST_DIR):  # fmt: skip
+                file.unlink()
+        assert not DatasetStore.open(path).records()
+        return path
+
+    shards = list(range(6))
+    results = generation.render_shards(emptied(), shards, 12, digest, overlap=True)
+    assert [r["shard"] for r in results] == shards
+    assert store_files(tmp_path / "store") == store_files(tmp_path / "reference")
+    fill = generation._fill_shard
+
+    def failing(store, randomiser, shard, *args):
+        if shard == 4:
+            raise RuntimeError("rendering failed")
+        return fill(store, randomiser, shard, *args)
+
+    monkeypatch.setattr(generation, "_fill_shard", failing)
+    with pytest.raises(RuntimeError, match="rendering failed"):
+        generation.render_shards(emptied(), shards, 12, digest, overlap=True)
+    assert sorted(DatasetStore.open(tmp_path / "store").records()) == [0, 1, 2, 3]
+
+
+def test_worker_processes_with_tasks_of_several_shards_make_the_same_store(tmp_path) -> None:
+    config = load_config(tiny_config(tmp_path, storage={"shard_samples": 1}))
+    generate(config, tmp_path / "one", num=12)
+    generate(config, tmp_path / "two", num=12, workers=2)  # tasks of 3 shards, then 1
+    assert store_files(tmp_path / "one") == store_files(tmp_path / "two")
 
 
 def test_png_storage_holds_the_same_samples(tmp_path, capsys) -> None:

@@ -107,6 +107,9 @@ TIMING_KEYS = ("render", "labels", "checksum", "compression", "io", "write", "wr
 _LABEL_QUEUE = 2
 #: Threads that label, checksum and compress rendered samples in a pipelined run.
 _SAMPLE_THREADS = 2
+#: Most shards in one worker process's task (:func:`_next_task`): within a task each
+#: shard's write overlaps the next one's rendering.
+_TASK_SHARDS = 4
 #: Whether this process is a dataset worker (:func:`_worker_init`).
 _IN_WORKER = False
 #: Where samples are labelled: None chooses the device that renders them on GPU variants
@@ -381,19 +384,23 @@ def _new_shard_buffers(store: DatasetStore) -> _Buffers:
     return host, device_shard_buffer(store.layout, count, device)
 
 
-def _shard_buffers(store: DatasetStore) -> _Buffers:
-    """A shard's buffers (:func:`_new_shard_buffers`), kept from one task to the next in a
-    worker process (fresh memory costs page faults, and on a virtual machine often more:
-    the host may have taken freed pages back; page-locking costs more still), new in any
-    other process (nothing is held after :func:`generate`)."""
+def _shard_buffers(store: DatasetStore, which: int = 0) -> _Buffers:
+    """Set ``which`` (0 or 1: a worker that writes one shard while it renders the next
+    alternates two) of a shard's buffers (:func:`_new_shard_buffers`), kept from one task
+    to the next in a worker process (fresh memory costs page faults, and on a virtual
+    machine often more: the host may have taken freed pages back; page-locking costs more
+    still), new in any other process (nothing is held after :func:`generate`)."""
     global _WORKER_BUFFER
     if not _IN_WORKER:
         return _new_shard_buffers(store)
     key = (str(store.path), store.digest)
     if _WORKER_BUFFER is None or _WORKER_BUFFER[0] != key:
         _WORKER_BUFFER = None  # the old ones are freed before the new ones are made
-        _WORKER_BUFFER = (key, _new_shard_buffers(store))
-    return _WORKER_BUFFER[1]
+        _WORKER_BUFFER = (key, {})
+    kept = _WORKER_BUFFER[1]
+    if which not in kept:
+        kept[which] = _new_shard_buffers(store)
+    return kept[which]
 
 
 def render_shard(
@@ -419,16 +426,55 @@ def render_shard(
     :data:`TIMING_KEYS`, ``device`` the GPU a worker process was pinned to (its
     ``CUDA_VISIBLE_DEVICES``; None in the calling process and on CPU).
     """
+    return render_shards(path, [shard], num_samples, digest, on_sample=on_sample)[0]
+
+
+def render_shards(
+    path: str | Path,
+    shards: list[int],
+    num_samples: int,
+    digest: str,
+    *,
+    overlap: bool = False,
+    on_sample: Callable[[], None] | None = None,
+) -> list[dict[str, Any]]:
+    """:func:`render_shard` of each of ``shards``, in order (a task; each shard is written,
+    record last, before the call returns).
+
+    With ``overlap``, a shard is written (checksums, compression, files) on a second thread
+    while the next one renders, in a second set of buffers: the writes wait mostly for the
+    disk and the GPU, which the renderer then does not wait for (a worker holds two shards
+    in memory instead of one). The first failure is raised once the shards before it are
+    written.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
     store, randomiser = _open(path, digest)
-    buffers = _shard_buffers(store)
-    metas, timing = _fill_shard(store, randomiser, shard, num_samples, buffers, on_sample)
-    buffer, device = buffers
-    write = store.write_shard(shard, buffer, metas, on_device=device)
-    result = _result(shard, metas, timing, write, 0.0)
-    result["encoder"] = store.encoder_name()
-    if _IN_WORKER:
-        result["device"] = os.environ.get(_devices.CUDA_ENV) or None
-    return result
+    results: list[dict[str, Any]] = []
+
+    def write(shard: int, buffers: _Buffers, metas: list, timing: dict) -> dict[str, Any]:
+        buffer, device = buffers
+        done = store.write_shard(shard, buffer, metas, on_device=device)
+        result = _result(shard, metas, timing, done, 0.0)
+        result["encoder"] = store.encoder_name()
+        if _IN_WORKER:
+            result["device"] = os.environ.get(_devices.CUDA_ENV) or None
+        return result
+
+    with ThreadPoolExecutor(1, thread_name_prefix="virtus-shard-writer") as writer:
+        pending = None
+        for number, shard in enumerate(shards):
+            buffers = _shard_buffers(store, number % 2 if overlap else 0)
+            filled = _fill_shard(store, randomiser, shard, num_samples, buffers, on_sample)
+            if pending is not None:  # before another write: shards are written in order
+                results.append(pending.result())
+            if not overlap:
+                results.append(write(shard, buffers, *filled))
+                continue
+            pending = writer.submit(write, shard, buffers, *filled)
+        if pending is not None:
+            results.append(pending.result())
+    return results
 
 
 def _result(
@@ -568,8 +614,10 @@ def _run_local(
     tick: Callable, pipelined: bool,
 ) -> Iterator[dict[str, Any]]:  # fmt: skip
     """The shards in this process (one worker) or in ``placement.workers`` spawned
-    processes, each pinned to its GPU (:func:`virtus.data.devices.pinned_pool`); at most two
-    shards a worker are queued."""
+    processes, each pinned to its GPU (:func:`virtus.data.devices.pinned_pool`). A worker's
+    task is a few consecutive shards (:func:`_next_task`), written while the next renders
+    when two shards fit in memory (``pipelined``, :func:`render_shards`); at most two tasks
+    a worker are queued."""
     workers = placement.workers
     if workers == 1 and pipelined:
         yield from _run_pipelined(path, shards, num, digest, tick)
@@ -578,25 +626,37 @@ def _run_local(
         for shard in shards:
             yield render_shard(path, shard, num, digest, on_sample=lambda: tick(1))
         return
+    from collections import deque
     from concurrent.futures import FIRST_COMPLETED, wait
+
+    queue = deque(shards)
+
+    def submit() -> Any:
+        task = _next_task(queue, workers)
+        return pool.submit(render_shards, str(path), task, num, digest, overlap=pipelined)
 
     pool = _devices.pinned_pool(workers, placement.devices, _worker_init, (placement.threads,))
     with pool:
         pending = set()
-        queue = iter(shards)
-        for shard in queue:
-            pending.add(pool.submit(render_shard, str(path), shard, num, digest))
-            if len(pending) >= 2 * workers:
-                break
+        while queue and len(pending) < 2 * workers:
+            pending.add(submit())
         while pending:
             done, pending = wait(pending, return_when=FIRST_COMPLETED)
             for future in done:
-                result = future.result()
-                tick(result["samples"])
-                yield result
-                nxt = next(queue, None)
-                if nxt is not None:
-                    pending.add(pool.submit(render_shard, str(path), nxt, num, digest))
+                for result in future.result():
+                    tick(result["samples"])
+                    yield result
+                if queue:
+                    pending.add(submit())
+
+
+def _next_task(queue: Any, workers: int) -> list[int]:
+    """The next worker task's shards, taken from the front of ``queue`` (a deque): up to
+    :data:`_TASK_SHARDS` (more shards a task overlap more writes with rendering), fewer as
+    the queue empties so that the workers finish together (at most half a worker's share
+    of the queue)."""
+    size = max(1, min(_TASK_SHARDS, len(queue) // (2 * workers)))
+    return [queue.popleft() for _ in range(min(size, len(queue)))]
 
 
 def _run_ray(
