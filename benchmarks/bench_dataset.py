@@ -31,7 +31,10 @@ before a plane) with :func:`virtus.data.generate`, once per ``--workers`` value 
   seconds a sample and its split (render, labels, checksum, compression, io), compressed MB
   a sample, who encoded, and whether the arrays are the same (every sample's checksum equal
   to the first run's);
-  with ``--gpus 1`` on a GPU host, else with the first ``--workers``;
+  with ``--gpus 1`` on a GPU host, else with the first ``--workers``; with
+  ``--disk-ceiling``, then the last store's files alone, written by as many processes as
+  it had workers (:func:`disk_ceiling`: until the writes return, and until they are on
+  the disk) -- what the disk allows any generator;
 * with ``--gpus 1,2,4``: the same store made on 1, 2, 4 GPUs (``--workers-per-gpu`` pinned
   workers each, default 3/4 of the cores shared out over the most GPUs asked for), side by
   side: images/s over the whole run and in its steady state (between 10 % and 90 % of the
@@ -47,6 +50,11 @@ before a plane) with :func:`virtus.data.generate`, once per ``--workers`` value 
     PYTHONPATH=src python benchmarks/bench_dataset.py --gpus 1,2 --fake-gpus 2 --tiny --samples 16
     PYTHONPATH=src python benchmarks/bench_dataset.py --codec shuffle-zstd --compress-on cpu gpu \
         --gpus 1 --workers-per-gpu 8 --samples 480 --shard 8 --codecs
+    PYTHONPATH=src python benchmarks/bench_dataset.py --codec shuffle-zstd --compress-on gpu \
+        --gpus 1 --workers-per-gpu 8 --samples 720 --shard 4 --no-renderer --disk-ceiling
+
+Stores are made in a temporary folder under ``$TMPDIR`` (``TMPDIR=/dev/shm`` makes them
+in memory, taking the disk out of the measurement).
 
 The process and its workers run with glibc's malloc as the ``virtus`` command sets it
 (:mod:`virtus.allocator`); ``--malloc default`` keeps glibc's defaults.
@@ -360,6 +368,7 @@ def compression_runs(config, folder: Path, args, per_gpu: int | None, frames: in
         first = checksums if first is None else first
         stages = {k: round(report.timing_s.get(k, 0.0) / args.samples, 4) for k in TIMING_KEYS}
         size = sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
+        arrays = {a.name: stored_bytes(path / a.name) / args.samples for a in store.layout}
         runs.append(
             {
                 "compress_on": value, **where, "encoders": report.encoders,
@@ -368,12 +377,74 @@ def compression_runs(config, folder: Path, args, per_gpu: int | None, frames: in
                 "steady_images_per_s": steady and round(steady * frames, 1),
                 "cpu_s_per_sample": round(cpu / args.samples, 4),
                 "stage_s_per_sample": stages, "mb_per_sample": round(size / args.samples / 1e6, 2),
+                "array_bytes_per_sample": {k: round(v) for k, v in arrays.items()},
                 "same_arrays_as_first": checksums == first,
             }
         )  # fmt: skip
         print(compression_line(runs[-1]), file=sys.stderr, flush=True)
         shutil.rmtree(path)
     return runs
+
+
+def stored_bytes(folder: Path) -> int:
+    """Bytes of every file under ``folder``."""
+    return sum(p.stat().st_size for p in folder.rglob("*") if p.is_file())
+
+
+def _write_shards(root: str, shards: list[int], sizes: list[int], seed: int) -> None:
+    """One writer of :func:`disk_ceiling`: each shard's file of each array (``sizes``
+    bytes), written under a temporary name and renamed, as the store's shard writer does."""
+    data = np.random.default_rng(seed).integers(0, 256, max(sizes), np.uint8).tobytes()
+    for shard in shards:
+        for array, size in enumerate(sizes):
+            folder = Path(root) / f"a{array}"
+            folder.mkdir(parents=True, exist_ok=True)
+            temporary = folder / f".{shard}.tmp"
+            with open(temporary, "wb") as handle:
+                handle.write(memoryview(data)[:size])
+            os.replace(temporary, folder / str(shard))
+
+
+def disk_ceiling(folder: Path, array_bytes: dict, samples: int, shard: int, writers: int,
+                 frames: int) -> dict:  # fmt: skip
+    """What the disk alone allows a run: ``writers`` processes write the files that
+    ``samples`` samples make (each array's shard files, ``array_bytes`` a sample, random
+    bytes), and nothing else; then ``os.sync()``. Seconds until the writes return (into
+    the page cache) and until they are on the disk, as GB/s and the images/s they allow."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    shards = list(range(-(-samples // shard)))
+    sizes = [max(1, round(b * shard)) for b in array_bytes.values()]
+    root = folder / "disk-ceiling"
+    begin = time.perf_counter()
+    with ProcessPoolExecutor(writers) as pool:
+        jobs = [pool.submit(_write_shards, str(root), shards[k::writers], sizes, k)
+                for k in range(writers)]  # fmt: skip
+        for job in jobs:
+            job.result()
+    written = time.perf_counter() - begin
+    os.sync()
+    synced = time.perf_counter() - begin
+    total = len(shards) * sum(sizes)
+    import shutil
+
+    shutil.rmtree(root)
+    return {
+        "writers": writers, "gb": round(total / 1e9, 2),
+        "written_s": round(written, 2), "written_gb_per_s": round(total / written / 1e9, 2),
+        "written_images_per_s": round(len(shards) * shard * frames / written, 1),
+        "synced_s": round(synced, 2), "synced_gb_per_s": round(total / synced / 1e9, 2),
+        "synced_images_per_s": round(len(shards) * shard * frames / synced, 1),
+    }  # fmt: skip
+
+
+def disk_line(entry: dict) -> str:
+    return (
+        f"disk alone ({entry['writers']} writers, {entry['gb']} GB of the run's files): "
+        f"written in {entry['written_s']} s ({entry['written_gb_per_s']} GB/s, "
+        f"{entry['written_images_per_s']} images/s), on the disk after {entry['synced_s']} s "
+        f"({entry['synced_gb_per_s']} GB/s, {entry['synced_images_per_s']} images/s)"
+    )
 
 
 def compression_line(entry: dict) -> str:
@@ -601,6 +672,11 @@ def main() -> None:
         "--compress-on", nargs="+", choices=list(COMPRESS_ON),
         help="compare who compresses (codec zstd or shuffle-zstd), e.g. cpu gpu",
     )  # fmt: skip
+    parser.add_argument(
+        "--disk-ceiling", action="store_true",
+        help="with --compress-on: also write the files of the last run's store, and nothing "
+        "else, from as many processes as it had workers (what the disk alone allows)",
+    )  # fmt: skip
     parser.add_argument("--json", type=Path, help="also write the numbers here")
     parser.add_argument(
         "--malloc", choices=["virtus", "default"], default="virtus",
@@ -614,6 +690,8 @@ def main() -> None:
         keep_freed_memory()
     if args.compress_on and args.codec not in GPU_CODECS:
         parser.error(f"--compress-on compares codecs {' or '.join(GPU_CODECS)}, not {args.codec}")
+    if args.disk_ceiling and not args.compress_on:
+        parser.error("--disk-ceiling needs --compress-on (the store whose files it writes)")
     per_gpu = gpu_setup(parser, args) if args.gpus else None
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -628,9 +706,16 @@ def main() -> None:
         frames_per_sample = len(sample.scanner.sequence)
         cam = sample.scanner.rig.camera.intrinsics
         renderer_load = load()
-        renderer, runs, gpu_runs, compression = None, [], [], []
+        renderer, runs, gpu_runs, compression, disk = None, [], [], [], None
         if args.compress_on:
             compression = compression_runs(config, folder, args, per_gpu, frames_per_sample)
+            if args.disk_ceiling:
+                writers = per_gpu * args.gpus[0] if args.gpus else args.workers[0]
+                disk = disk_ceiling(
+                    folder, compression[-1]["array_bytes_per_sample"], args.samples, args.shard,
+                    writers, frames_per_sample,
+                )  # fmt: skip
+                print(disk_line(disk), file=sys.stderr, flush=True)
             if args.codecs:  # one store to take the sample from
                 generate(config.with_num_samples(1), folder / "store_w1", workers=1)
             first = folder / "store_w1"
@@ -664,6 +749,7 @@ def main() -> None:
         "fake_gpus": args.fake_gpus,
         "gpu_runs": gpu_runs,
         "compression_runs": compression,
+        "disk_ceiling": disk,
         "codecs": codecs,
         "paper_images_per_s": 3.1,
         "target_images_per_s": 150.0,
