@@ -38,7 +38,7 @@ def test_page_locked_buffers_are_disjoint_aligned_views_of_one_block(layout) -> 
     blocks = []
 
     def allocate(n: int) -> np.ndarray:
-        blocks.append(np.zeros(n + 64, np.uint8)[1:][: n])  # misaligned on purpose
+        blocks.append(np.zeros(n + 64, np.uint8)[1:][:n])  # misaligned on purpose
         return blocks[-1]
 
     buffer = page_locked_shard_buffer(layout, 3, allocate)

@@ -209,3 +209,25 @@ def test_the_gpu_compressor_reads_the_device_buffers(tmp_path, llvm, monkeypatch
     assert len(chunks) >= 13 * 2
     assert {n: device[n] for n in chunks} == {n: host[n] for n in chunks}
     assert DatasetStore.open(tmp_path / "device").verify().ok
+
+
+def test_a_gpu_run_without_lockable_memory_keeps_its_samples_in_ordinary_memory(
+    tmp_path, monkeypatch
+) -> None:
+    config = load_config(tiny_config(tmp_path, num_samples=2))
+    generate(config, tmp_path / "store")
+    store = DatasetStore.open(tmp_path / "store")
+    monkeypatch.setattr(generate_module, "_staging_device", lambda store: "cuda")
+    monkeypatch.setattr(generate_module, "device_shard_buffer", lambda *args: "on the GPU")
+    locked = {"frames": "page-locked"}
+    monkeypatch.setattr(generate_module, "page_locked_shard_buffer", lambda *args: locked)
+    assert generate_module._new_shard_buffers(store) == (locked, "on the GPU")
+
+    def refused(*args):
+        raise RuntimeError("CUDA error: out of memory")
+
+    monkeypatch.setattr(generate_module, "page_locked_shard_buffer", refused)
+    host, device = generate_module._new_shard_buffers(store)
+    assert device == "on the GPU"
+    assert host.keys() == {a.name for a in store.layout}
+    assert all(host[a.name].shape == (store.shard_samples, *a.shape) for a in store.layout)

@@ -372,15 +372,19 @@ def _staging_device(store: DatasetStore) -> str | None:
 def _new_shard_buffers(store: DatasetStore) -> _Buffers:
     """A shard's host buffer and, where the compressor reads the device's copy
     (:func:`_staging_device`), its device buffer; the host buffer page-locked when that
-    device is a GPU (:mod:`virtus.data.devicebuffers`)."""
+    device is a GPU (:mod:`virtus.data.devicebuffers`) and the system lets it lock that
+    much memory (else ordinary memory: the same bytes, copied more slowly)."""
     count, device = store.shard_samples, _staging_device(store)
     if device is None:
         return store.shard_buffer(count), None
-    host = (
-        page_locked_shard_buffer(store.layout, count)
-        if device == "cuda"
-        else store.shard_buffer(count)
-    )
+    host = None
+    if device == "cuda":
+        try:
+            host = page_locked_shard_buffer(store.layout, count)
+        except RuntimeError:  # torch's pinned allocator: no lockable memory left
+            host = None
+    if host is None:
+        host = store.shard_buffer(count)
     return host, device_shard_buffer(store.layout, count, device)
 
 
