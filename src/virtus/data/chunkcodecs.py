@@ -66,17 +66,17 @@ mix both (a run resumed with another ``compress_on``): each shard record names i
 written before encoders were recorded name none). Resuming is unaffected: ``compress_on``
 is not part of a store's identity.
 
-**Does it pay?** Not clearly on the hosts measured, so ``compress_on`` defaults to ``cpu``;
-``gpu`` is there for hosts with few cores per GPU, and the store format stays plain Zarr
-whichever is chosen. NVIDIA H100 hosts (16 cores), 960 x 960 x 52 frames,
-``shuffle-zstd`` level 1, 8 worker processes on the one GPU (``benchmarks/bench_dataset.py
---codec shuffle-zstd --compress-on cpu gpu --gpus 1 --workers-per-gpu 8 --samples N
---shard 4 --no-renderer``, two rounds each of N = 480 and 720): over the whole run CPU
-983-1,241 images/s, GPU 979-1,163; in the steady part of the 720-sample runs CPU
-1,139-1,441, GPU 1,564-1,728. A sample costs the cores 0.52-0.59 CPU-s compressing on
-them (0.29-0.33 of it compression), 0.38-0.45 on the GPU (0.08 of it compression: staging
-the bytes, shuffled on the device by the host's CUDA torch); before frames were copied back
-through a kept buffer (below) the GPU gave 840 images/s over a 480-sample run (one run).
+**Does it pay?** Yes, on the NVIDIA H100 hosts measured (16 cores), where the samples are
+labelled on the GPU: a sample then stays on the device from rendering to compression
+(:mod:`virtus.data.devicebuffers`) and each worker writes a shard while it renders the next
+(``benchmarks/bench_dataset.py --codec shuffle-zstd --compress-on cpu gpu --gpus 1
+--workers-per-gpu 8 --samples 720 --shard 4 --no-renderer``; 960 x 960 x 52 frames,
+``shuffle-zstd`` level 1, store on the local disk): 1,873-2,758 images/s in the steady part
+on the GPU (three runs, two machines; 1,239-1,480 over the whole run, worker start-up
+included) against 1,411 on the cores (one run, beside the 1,873; 1,063 over the run);
+0.28-0.34 CPU-s a sample against 0.58. ``compress_on`` still defaults to ``cpu``: a store
+compressed on the GPU needs numcodecs >= :data:`READER_NUMCODECS` to be read, and its bytes
+(not its arrays) depend on nvCOMP's version.
 
 **nvCOMP's encoders, measured** (``benchmarks/bench_dataset.py --samples 1 --codecs``,
 nvCOMP 6.0, one NVIDIA H100, one 133 MB sample staged as ``shuffle-zstd`` stages it, all
@@ -364,14 +364,16 @@ class NvcompZstdFrames:
     """nvCOMP's batched Zstd on this process's CUDA device (``RAW`` bitstream: standard zstd
     frames): all pieces of all chunks of one call compressed in one batch.
 
-    The chunks come from host memory (a shard buffer). They are gathered into one staging
-    buffer on the device (:func:`staging_layout`: chunk starts aligned, pieces carved from it
-    by offset): with a CUDA build of torch each chunk is copied up and byte-shuffled on the
-    device, else shuffled into a host staging buffer (:func:`stage_on_host`) that is copied
-    up at once. The frames are written into slots of a device buffer and come back in one
-    copy into a page-locked host buffer (:meth:`_frames`). These buffers are kept per
-    thread and grow as needed: each about as large as the uncompressed bytes of the largest
-    call (a shard's, in a worker), on the device and (page-locked) on the host. nvCOMP's
+    The chunks come from host memory (a shard buffer), or from the device where the samples
+    were made (``on_device``: :mod:`virtus.data.devicebuffers`). They are gathered into one
+    staging buffer on the device (:func:`staging_layout`: chunk starts aligned, pieces
+    carved from it by offset): with a CUDA build of torch each chunk is copied up (unless it
+    is there already) and byte-shuffled on the device, else shuffled into a host staging
+    buffer (:func:`stage_on_host`) that is copied up at once. The frames are written into
+    slots of a device buffer and come back in one copy into a page-locked host buffer
+    (:meth:`_frames`). These buffers are kept per thread and grow as needed: each about as
+    large as the uncompressed bytes of the largest call (a shard's, in a worker), on the
+    device and (page-locked) on the host. nvCOMP's
     Zstd has no level setting: ``level`` in ``zarr.json`` is the CPU's. An nvCOMP
     ``Codec`` must not be used by two threads at once (its manager and scratch buffers), so
     each thread that encodes makes its own (a pipelined run encodes on two).

@@ -18,14 +18,16 @@
    then its record. On a GPU a sample is rendered and labelled where it is traced
    (:meth:`~virtus.scanner.Scanner.render_on_device`,
    :func:`~virtus.data.labels_jit.device_sample_arrays`) and copied once into the buffer,
-   so the host's cores only checksum, compress and write. A task depends only on the store
-   path and the shard number, so it is idempotent: a retried or repeated task writes the
-   same bytes. Tasks run in this process (``workers=1``: rendering, labelling and writing
-   run side by side on three threads,
+   so the host's cores only checksum, compress and write; when the GPU compresses too, the
+   compressor reads the device's copy (:mod:`virtus.data.devicebuffers`). A task depends
+   only on the store path and the shard number, so it is idempotent: a retried or
+   repeated task writes the same bytes. Tasks run in this process (``workers=1``:
+   rendering, labelling and writing run side by side on three threads,
    :func:`_run_pipelined`), in ``workers`` spawned processes (each owns the shards it is
-   given; on a host with GPUs each is pinned to one, :mod:`virtus.data.devices`, and uses
-   its share of the cores), or on Ray (:mod:`virtus.data.raycluster`: CPU tasks, or one
-   actor per GPU share).
+   given, a few a task, each written while the next renders, :func:`render_shards`; on a
+   host with GPUs each is pinned to one, :mod:`virtus.data.devices`, and uses its share of
+   the cores), or on Ray (:mod:`virtus.data.raycluster`: CPU tasks, or one actor per GPU
+   share).
 
 Rerunning the same command after an interruption (even ``kill -9``) renders only the
 shards without a record; the store ends byte for byte as an uninterrupted run leaves it

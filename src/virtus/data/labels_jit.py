@@ -7,7 +7,9 @@ the modulation, the masks and the object ids are computed where the frames are, 
 store's precision, and each array crosses to the host once, in its stored dtype, straight
 into its slot of the shard buffer. On a GPU this takes the labels (about 0.2 CPU-seconds of
 a 960 x 960 sample) and the float64 ground-truth copies off the host, whose cores are left
-to checksum and compress.
+to checksum and compress. When the GPU compresses as well, the arrays are made in one
+evaluation into a device shard buffer that the compressor reads, and copied from it into a
+page-locked host buffer (``on_device``, :mod:`virtus.data.devicebuffers`).
 
 The formulas are the host's, shared where they are not numpy-specific
 (:func:`virtus.data.labels.surface_distance`, the decoder's
