@@ -122,7 +122,7 @@ LABELS_ON_DEVICE: bool | None = None
 #: reads the samples on the device, the device's (name -> torch tensor; else None).
 _Buffers = tuple[dict[str, np.ndarray], "dict[str, Any] | None"]
 #: In a worker process: the shard buffers kept between tasks (see :func:`_shard_buffers`).
-_WORKER_BUFFER: tuple[tuple[str, str], _Buffers] | None = None
+_WORKER_BUFFER: tuple[tuple[str, str], dict[int, _Buffers]] | None = None
 #: In a worker process: the CPU threads it may use to synthesise, checksum and compress
 #: (its share of the host's cores, :attr:`virtus.data.devices.Placement.threads`).
 _WORKER_THREADS: int | None = None
