@@ -9,7 +9,7 @@ before a plane) with :func:`virtus.data.generate`, once per ``--workers`` value 
   bytes on disk, the CPU seconds a sample (this process and its workers: on a GPU host the
   cores, not the GPU, bound the rate), and the load average before and after each
   generation;
-* the per-stage split (:data:`virtus.data.generate.TIMING_KEYS`), seconds summed over the
+* the per-stage split (:data:`virtus.data.shardtask.TIMING_KEYS`), seconds summed over the
   samples: render (trace + synthesis of every frame), labels (ground truth -> phase, order,
   numerator/denominator, modulation, masks, object ids), checksum (SHA-256 of every stored
   byte), compression (chunk encoding), io (shard files and records), write_wait (rendering
@@ -80,9 +80,9 @@ import yaml
 from virtus.data import DatasetStore, generate, load_config
 from virtus.data.chunkcodecs import COMPRESS_ON, GPU_CODECS, quiet_numcodecs
 from virtus.data.config import CODECS
-from virtus.data.generate import TIMING_KEYS
 from virtus.data.sampling import Randomiser
 from virtus.data.shards import ShardEncoder
+from virtus.data.shardtask import TIMING_KEYS
 from virtus.data.store import zarr_compressor
 
 

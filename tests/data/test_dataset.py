@@ -346,7 +346,7 @@ def test_a_failed_sample_leaves_its_shard_unrecorded_and_the_rerun_completes(
     sample that fails there must fail the run and keep its shard out of the manifest."""
     import importlib
 
-    generation = importlib.import_module("virtus.data.generate")  # the module, not the function
+    generation = importlib.import_module("virtus.data.shardtask")
     config = load_config(tiny_config(tmp_path))
     generate(config, tmp_path / "reference", num=12)
     calls = {"n": 0}
@@ -388,7 +388,7 @@ def test_shards_written_while_the_next_renders_are_the_same_files(tmp_path, monk
     import importlib
     import shutil
 
-    generation = importlib.import_module("virtus.data.generate")
+    generation = importlib.import_module("virtus.data.shardtask")
     config = load_config(tiny_config(tmp_path, storage={"shard_samples": 2}))
     generate(config, tmp_path / "reference", num=12)
     digest = DatasetStore.open(tmp_path / "reference").digest

@@ -138,7 +138,7 @@ def test_plan_refuses_gpus_where_none_is_visible() -> None:
 def _probe(barrier: str, workers: int) -> dict:
     """A pool task: what this worker sees. Waits until ``workers`` distinct workers have
     arrived (files in ``barrier``), so that every worker of the pool answers once."""
-    generation = importlib.import_module("virtus.data.generate")  # not the function
+    generation = importlib.import_module("virtus.data.shardtask")
     store = importlib.import_module("virtus.data.store")
     folder = Path(barrier)
     (folder / str(os.getpid())).touch()
@@ -160,9 +160,9 @@ def test_each_worker_of_a_real_pool_sees_its_own_gpu_before_the_renderer_loads(
 ) -> None:
     monkeypatch.delenv(CUDA_ENV, raising=False)
     monkeypatch.delenv("CUDA_DEVICE_ORDER", raising=False)
-    generation = importlib.import_module("virtus.data.generate")
+    generation = importlib.import_module("virtus.data.shardtask")
     assert pinned() is None  # not a worker
-    with pinned_pool(2, ("GPU-a", "GPU-b"), generation._worker_init, (1, False)) as pool:
+    with pinned_pool(2, ("GPU-a", "GPU-b"), generation.worker_init, (1, False)) as pool:
         answers = list(pool.map(_probe, [str(tmp_path)] * 2, [2] * 2))
     assert len({a["pid"] for a in answers}) == 2
     by_index = {a["pinned"]["index"]: a for a in answers}

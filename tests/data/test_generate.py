@@ -14,6 +14,7 @@ import pytest
 from tests.data.test_dataset import run_cli, store_files, tiny_config
 from virtus.data import DatasetStore, generate, load_config
 from virtus.data.devices import CUDA_ENV, FAKE_GPUS_ENV
+from virtus.data.generate import _TASK_SHARDS
 
 
 def test_two_pinned_gpus_make_the_one_gpu_store(tmp_path, monkeypatch) -> None:
@@ -52,15 +53,18 @@ main(sys.argv[2:])
 
 @pytest.mark.slow
 def test_a_killed_multi_gpu_run_resumes_to_the_one_gpu_store(tmp_path) -> None:
-    config = tiny_config(tmp_path, num_samples=32, storage={"shard_samples": 4})
+    config = tiny_config(tmp_path, num_samples=64, storage={"shard_samples": 2})
     reference = tmp_path / "reference"
     generate(load_config(config), reference)  # one process, no GPU
     out = tmp_path / "killed"
     arguments = ["dataset", "generate", "--config", str(config), "--out", str(out)]
     environment = {**_environ(), FAKE_GPUS_ENV: "2"}
     complete = []
-    # 8 shards; 2 workers hold at most 4 shards in flight, so a run killed at its k-th
-    # result (k <= 3) has finished at most k + 4 < 8 shards whatever the machine's speed.
+    # 32 shards; 2 workers are given 4 tasks of at most _TASK_SHARDS (4) shards at first,
+    # and one more task each time a task's results have all reached the caller, so a run
+    # killed at its k-th result (k <= 3) has finished at most (4 + k - 1) * 4 = 24 < 32
+    # shards whatever the machine's speed.
+    assert _TASK_SHARDS == 4
     for kill_at in (1, 3):
         killed = subprocess.run(
             [sys.executable, "-c", _KILLED_AFTER_RESULTS, str(kill_at), *arguments],
@@ -68,7 +72,7 @@ def test_a_killed_multi_gpu_run_resumes_to_the_one_gpu_store(tmp_path) -> None:
         )  # fmt: skip
         assert killed.returncode == -signal.SIGKILL, (kill_at, killed.stderr)
         complete.append(len(DatasetStore.open(out).samples()))
-    assert 0 < complete[0] and complete == sorted(complete) and complete[-1] < 32, complete
+    assert 0 < complete[0] and complete == sorted(complete) and complete[-1] < 64, complete
     final = subprocess.run(
         [sys.executable, "-m", "virtus", *arguments, "--gpus", "2"],
         capture_output=True, text=True, timeout=300, env=environment,

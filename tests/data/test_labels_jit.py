@@ -23,8 +23,9 @@ from virtus.data.labels import array_layout, sample_arrays
 from virtus.data.labels_jit import device_sample_arrays
 from virtus.data.sampling import Randomiser
 
-#: The module (``virtus.data.generate`` the name is its function).
+#: The modules (``virtus.data.generate`` the name is its function).
 generate_module = importlib.import_module("virtus.data.generate")
+task_module = importlib.import_module("virtus.data.shardtask")
 VARIANT = "llvm_ad_rgb"
 #: Float32 labels computed in float32 on both sides (modulation, numerator, denominator)
 #: differ by the rounding of sums taken in another order, fused multiply-adds and the
@@ -150,9 +151,9 @@ def test_generate_labels_on_the_device_as_on_the_host(tmp_path, llvm, monkeypatc
     tolerances of a host-labelled store (frames within 1 DN: the host synthesises its own);
     and the same bytes when generated again (kill/resume relies on it)."""
     config = load_config(tiny_config(tmp_path, num_samples=6))
-    monkeypatch.setattr(generate_module, "LABELS_ON_DEVICE", False)
+    monkeypatch.setattr(task_module, "LABELS_ON_DEVICE", False)
     generate(config, tmp_path / "host")
-    monkeypatch.setattr(generate_module, "LABELS_ON_DEVICE", True)
+    monkeypatch.setattr(task_module, "LABELS_ON_DEVICE", True)
     report = generate(config, tmp_path / "device")
     assert report.complete == 6
     store = DatasetStore.open(tmp_path / "device")
@@ -182,7 +183,7 @@ def test_the_gpu_compressor_reads_the_device_buffers(tmp_path, llvm, monkeypatch
     CPU tensors as nvCOMP reads CUDA ones): every batch comes from the device buffers, and
     the store's chunk files are byte for byte those of the same run compressing the host's
     copies."""
-    monkeypatch.setattr(generate_module, "LABELS_ON_DEVICE", True)
+    monkeypatch.setattr(task_module, "LABELS_ON_DEVICE", True)
     monkeypatch.setenv(codecs.FAKE_NVCOMP_ENV, "1")
     monkeypatch.setattr(codecs, "_PROCESS_COMPRESSOR", {})
     storage = {"shard_samples": 4, "codec": "shuffle-zstd", "compress_on": "gpu"}
@@ -201,7 +202,7 @@ def test_the_gpu_compressor_reads_the_device_buffers(tmp_path, llvm, monkeypatch
     generate(config, tmp_path / "device")
     assert from_device and all(from_device)
     from_device.clear()
-    monkeypatch.setattr(generate_module, "staging_device", lambda *args: None)
+    monkeypatch.setattr(task_module, "staging_device", lambda *args: None)
     generate(config, tmp_path / "host")
     assert from_device and not any(from_device)
     device, host = store_files(tmp_path / "device"), store_files(tmp_path / "host")
@@ -217,17 +218,17 @@ def test_a_gpu_run_without_lockable_memory_keeps_its_samples_in_ordinary_memory(
     config = load_config(tiny_config(tmp_path, num_samples=2))
     generate(config, tmp_path / "store")
     store = DatasetStore.open(tmp_path / "store")
-    monkeypatch.setattr(generate_module, "_staging_device", lambda store: "cuda")
-    monkeypatch.setattr(generate_module, "device_shard_buffer", lambda *args: "on the GPU")
+    monkeypatch.setattr(task_module, "_staging_device", lambda store: "cuda")
+    monkeypatch.setattr(task_module, "device_shard_buffer", lambda *args: "on the GPU")
     locked = {"frames": "page-locked"}
-    monkeypatch.setattr(generate_module, "page_locked_shard_buffer", lambda *args: locked)
-    assert generate_module._new_shard_buffers(store) == (locked, "on the GPU")
+    monkeypatch.setattr(task_module, "page_locked_shard_buffer", lambda *args: locked)
+    assert task_module._new_shard_buffers(store) == (locked, "on the GPU")
 
     def refused(*args):
         raise RuntimeError("CUDA error: out of memory")
 
-    monkeypatch.setattr(generate_module, "page_locked_shard_buffer", refused)
-    host, device = generate_module._new_shard_buffers(store)
+    monkeypatch.setattr(task_module, "page_locked_shard_buffer", refused)
+    host, device = task_module._new_shard_buffers(store)
     assert device == "on the GPU"
     assert host.keys() == {a.name for a in store.layout}
     assert all(host[a.name].shape == (store.shard_samples, *a.shape) for a in store.layout)

@@ -12,11 +12,14 @@ and its samples (used by :class:`virtus.data.store.DatasetStore` on every read).
 * A sample (:class:`DamagedSample`): its arrays read back and match its recorded checksum;
   a decompression error or a truncated shard file is a damaged sample too, never a
   traceback.
+
+:class:`VerifyReport` is what :meth:`virtus.data.store.DatasetStore.verify` found.
 """
 
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +31,7 @@ from virtus.io.runs import config_digest, first_difference
 
 __all__ = [
     "DamagedSample",
+    "VerifyReport",
     "check_arrays",
     "check_description",
     "describe",
@@ -54,6 +58,40 @@ class DamagedSample(InputError):
             f"{store}: sample {index} is damaged: {problem} (virtus dataset verify {store} "
             "lists every damaged sample)",
         )
+
+
+@dataclass
+class VerifyReport:
+    """What :meth:`DatasetStore.verify` found.
+
+    Attributes
+    ----------
+    checked : samples read back and checksummed.
+    bad : ``(index, problem)`` of samples whose data does not match their checksum or
+        cannot be read.
+    missing : sample indices in ``[0, num_samples)`` without a record.
+    stray : leftover temporary files (from a killed writer; harmless, removed by the
+        next ``generate``).
+    """
+
+    checked: int = 0
+    bad: list[tuple[int, str]] = field(default_factory=list)
+    missing: list[int] = field(default_factory=list)
+    stray: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        """No bad sample and none missing."""
+        return not self.bad and not self.missing
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "ok": self.ok,
+            "checked": self.checked,
+            "bad": [list(b) for b in self.bad],
+            "missing": self.missing,
+            "stray": self.stray,
+        }
 
 
 def describe(error: BaseException, limit: int = 160) -> str:

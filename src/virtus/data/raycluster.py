@@ -13,7 +13,7 @@ and shard workers pinned to its GPUs.
   not do: Ray may run a later task in the same worker process on another GPU, but CUDA
   keeps the device a process started on.
 
-The shard function is passed in (:func:`virtus.data.generate.render_shard`): it depends on
+The shard function is passed in (:func:`virtus.data.shardtask.render_shard`): it depends on
 the store and the shard only, so a store made here is the one a local run makes.
 """
 

@@ -51,7 +51,7 @@ import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -63,6 +63,7 @@ from virtus.data import chunkcodecs as _codecs
 from virtus.data.chunkcodecs import quiet_numcodecs, zarr_compressor
 from virtus.data.integrity import (
     DamagedSample,
+    VerifyReport,
     check_arrays,
     check_description,
     describe,
@@ -150,40 +151,6 @@ class EncodedSample:
     checksum: str
     chunks: dict[str, Any]
     seconds: dict[str, float]
-
-
-@dataclass
-class VerifyReport:
-    """What :meth:`DatasetStore.verify` found.
-
-    Attributes
-    ----------
-    checked : samples read back and checksummed.
-    bad : ``(index, problem)`` of samples whose data does not match their checksum or
-        cannot be read.
-    missing : sample indices in ``[0, num_samples)`` without a record.
-    stray : leftover temporary files (from a killed writer; harmless, removed by the
-        next ``generate``).
-    """
-
-    checked: int = 0
-    bad: list[tuple[int, str]] = field(default_factory=list)
-    missing: list[int] = field(default_factory=list)
-    stray: list[str] = field(default_factory=list)
-
-    @property
-    def ok(self) -> bool:
-        """No bad sample and none missing."""
-        return not self.bad and not self.missing
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "ok": self.ok,
-            "checked": self.checked,
-            "bad": [list(b) for b in self.bad],
-            "missing": self.missing,
-            "stray": self.stray,
-        }
 
 
 class DatasetStore:
@@ -439,7 +406,7 @@ class DatasetStore:
         shard : the shard number.
         arrays : name -> (n, *shape) block of the layout's dtype, sample ``k`` of the shard
             at ``[k]`` (:meth:`shard_buffer`); rows past ``n = len(metas)`` are ignored.
-        metas : the ``n`` samples' metadata (:func:`virtus.data.generate.sample_meta`).
+        metas : the ``n`` samples' metadata (:func:`virtus.data.shardtask.sample_meta`).
         encoded : the samples' :meth:`encode_sample` of ``arrays``, if already made (else
             checksums and chunks are computed here, on a few threads).
         on_device : ``arrays`` on the batch compressor's device, which it then reads
