@@ -421,11 +421,20 @@ def test_shards_written_while_the_next_renders_are_the_same_files(tmp_path, monk
     assert sorted(DatasetStore.open(tmp_path / "store").records()) == [0, 1, 2, 3]
 
 
-def test_worker_processes_with_tasks_of_several_shards_make_the_same_store(tmp_path) -> None:
+@pytest.mark.parametrize("gpus", [0, 2], ids=["cpu workers", "workers pinned to 2 gpus"])
+def test_worker_processes_with_tasks_of_several_shards_make_the_same_store(
+    tmp_path, monkeypatch, gpus
+) -> None:
+    """Tasks of 3 shards, then 1; written while the next renders on (fake) GPUs only."""
+    from virtus.data.devices import FAKE_GPUS_ENV
+
+    monkeypatch.setenv(FAKE_GPUS_ENV, str(gpus))
     config = load_config(tiny_config(tmp_path, storage={"shard_samples": 1}))
-    generate(config, tmp_path / "one", num=12)
-    generate(config, tmp_path / "two", num=12, workers=2)  # tasks of 3 shards, then 1
+    generate(config, tmp_path / "one", num=12, workers=1)
+    report = generate(config, tmp_path / "two", num=12, workers=2)
     assert store_files(tmp_path / "one") == store_files(tmp_path / "two")
+    devices = set(report.shard_devices.values())  # which worker took which: their speed
+    assert devices <= {"0", "1"} if gpus else devices == {None}
 
 
 def test_png_storage_holds_the_same_samples(tmp_path, capsys) -> None:

@@ -167,9 +167,12 @@ def _run_local(
 ) -> Iterator[dict[str, Any]]:  # fmt: skip
     """The shards in this process (one worker) or in ``placement.workers`` spawned
     processes, each pinned to its GPU (:func:`virtus.data.devices.pinned_pool`). A worker's
-    task is a few consecutive shards (:func:`_next_task`), written while the next renders
-    when two shards fit in memory (``pipelined``, :func:`render_shards`); at most two tasks
-    a worker are queued."""
+    task is a few consecutive shards (:func:`_next_task`); workers pinned to GPUs write
+    each while the next renders when two shards fit in memory (``pipelined``,
+    :func:`render_shards`): there the writes wait for the disk and the GPU, while on the
+    cores both are the cores' work (2-core VM, 2 CPU workers, 48 samples at 960 x 960,
+    two rounds: 94-106 images/s overlapped against 117-123 not). At most two tasks a worker
+    are queued."""
     workers = placement.workers
     if workers == 1 and pipelined:
         yield from run_pipelined(path, shards, num, digest, tick)
@@ -182,10 +185,11 @@ def _run_local(
     from concurrent.futures import FIRST_COMPLETED, wait
 
     queue = deque(shards)
+    overlap = pipelined and bool(placement.devices)
 
     def submit() -> Any:
         task = _next_task(queue, workers)
-        return pool.submit(render_shards, str(path), task, num, digest, overlap=pipelined)
+        return pool.submit(render_shards, str(path), task, num, digest, overlap=overlap)
 
     pool = _devices.pinned_pool(workers, placement.devices, worker_init, (placement.threads,))
     with pool:
