@@ -212,9 +212,7 @@ def test_the_gpu_compressor_reads_the_device_buffers(tmp_path, llvm, monkeypatch
     assert DatasetStore.open(tmp_path / "device").verify().ok
 
 
-def test_a_gpu_run_without_lockable_memory_keeps_its_samples_in_ordinary_memory(
-    tmp_path, monkeypatch
-) -> None:
+def test_a_gpu_run_without_room_keeps_its_samples_on_the_host(tmp_path, monkeypatch) -> None:
     config = load_config(tiny_config(tmp_path, num_samples=2))
     generate(config, tmp_path / "store")
     store = DatasetStore.open(tmp_path / "store")
@@ -232,3 +230,6 @@ def test_a_gpu_run_without_lockable_memory_keeps_its_samples_in_ordinary_memory(
     assert device == "on the GPU"
     assert host.keys() == {a.name for a in store.layout}
     assert all(host[a.name].shape == (store.shard_samples, *a.shape) for a in store.layout)
+    monkeypatch.setattr(task_module, "device_shard_buffer", refused)  # no room on the GPU
+    host, device = task_module._new_shard_buffers(store)
+    assert device is None and host.keys() == {a.name for a in store.layout}

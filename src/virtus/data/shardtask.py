@@ -257,20 +257,23 @@ def _staging_device(store: DatasetStore) -> str | None:
 def _new_shard_buffers(store: DatasetStore) -> _Buffers:
     """A shard's host buffer and, where the compressor reads the device's copy
     (:func:`_staging_device`), its device buffer; the host buffer page-locked when that
-    device is a GPU (:mod:`virtus.data.devicebuffers`) and the system lets it lock that
-    much memory (else ordinary memory: the same bytes, copied more slowly)."""
+    device is a GPU (:mod:`virtus.data.devicebuffers`). Where the GPU has no room for the
+    device buffer, or the system will not lock that much host memory, the run goes on
+    without (the compressor reads the host's copy; ordinary memory): the same bytes, made
+    more slowly."""
     count, device = store.shard_samples, _staging_device(store)
-    if device is None:
-        return store.shard_buffer(count), None
-    host = None
-    if device == "cuda":
+    on_device = None
+    if device is not None:
         try:
-            host = page_locked_shard_buffer(store.layout, count)
-        except RuntimeError:  # torch's pinned allocator: no lockable memory left
-            host = None
-    if host is None:
-        host = store.shard_buffer(count)
-    return host, device_shard_buffer(store.layout, count, device)
+            on_device = device_shard_buffer(store.layout, count, device)
+        except RuntimeError:  # torch's out-of-memory errors are RuntimeErrors
+            on_device = None
+    if on_device is None or device != "cuda":
+        return store.shard_buffer(count), on_device
+    try:
+        return page_locked_shard_buffer(store.layout, count), on_device
+    except RuntimeError:  # torch's pinned allocator: no lockable memory left
+        return store.shard_buffer(count), on_device
 
 
 def _shard_buffers(store: DatasetStore, which: int = 0) -> _Buffers:
