@@ -346,11 +346,11 @@ def _run_episode(
         run.write_json(EPISODE_FILE, episode)
     observations: list[PoseObservation] = []
     # Poses are rendered and decoded here, one after the other (the renderer uses the whole
-    # device), and observed (detection, centroids: CPU work; local homographies: on the
-    # host, or on the GPU that rendered) in worker threads (or processes) while the next
-    # poses render. Results are taken in pose order, so files, log and result are those of
-    # a sequential run. Spawned workers fit on the host (each would start a device context
-    # of its own).
+    # device), and observed (detection on the host; centroids and local homographies on
+    # the host, or on the GPU that rendered) in worker threads (or processes) while the
+    # next poses render. Results are taken in pose order, so files, log and result are
+    # those of a sequential run. Spawned workers observe on the host (each would start a
+    # device context of its own).
     pending: collections.deque = collections.deque()
     device = observation_device(scanner.renders_on_gpu) if chosen.kind != "processes" else None
 
