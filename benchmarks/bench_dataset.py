@@ -411,6 +411,7 @@ def disk_ceiling(folder: Path, array_bytes: dict, samples: int, shard: int, writ
     ``samples`` samples make (each array's shard files, ``array_bytes`` a sample, random
     bytes), and nothing else; then ``os.sync()``. Seconds until the writes return (into
     the page cache) and until they are on the disk, as GB/s and the images/s they allow."""
+    import shutil
     from concurrent.futures import ProcessPoolExecutor
 
     shards = list(range(-(-samples // shard)))
@@ -426,8 +427,6 @@ def disk_ceiling(folder: Path, array_bytes: dict, samples: int, shard: int, writ
     os.sync()
     synced = time.perf_counter() - begin
     total = len(shards) * sum(sizes)
-    import shutil
-
     shutil.rmtree(root)
     return {
         "writers": writers, "gb": round(total / 1e9, 2),
