@@ -7,6 +7,7 @@ from __future__ import annotations
 import importlib
 import os
 import stat
+import sys
 import time
 from pathlib import Path
 
@@ -171,6 +172,7 @@ def test_each_worker_of_a_real_pool_sees_its_own_gpu_before_the_renderer_loads(
         answer = by_index[index]
         assert answer["env"] == device and answer["pinned"]["device"] == device
         assert answer["pinned"]["renderer_loaded"] == []  # CUDA_VISIBLE_DEVICES came first
+        assert answer["pinned"]["cuda_started"] is False
         assert answer["pinned"]["blocking_waits"] is False  # no such GPU (or no driver) here
         assert answer["threads"] == 1 and answer["write_threads"] == 1
         assert answer["order"] == "PCI_BUS_ID"  # ordinals as nvidia-smi numbers them
@@ -181,3 +183,67 @@ def test_each_worker_of_a_real_pool_sees_its_own_gpu_before_the_renderer_loads(
     assert answer["pinned"]["device"] is None and answer["env"] is None
     assert answer["pinned"]["blocking_waits"] is False  # a CPU worker never starts CUDA
     assert answer["order"] is None
+
+
+def _surroundings(name: str) -> dict:
+    """A pool task: the worker's value of ``name``, its working folder and its modules."""
+    return {
+        "value": os.environ.get(name),
+        "cwd": os.getcwd(),
+        "renderer_loaded": sorted(m for m in ("drjit", "mitsuba") if m in sys.modules),
+    }
+
+
+def test_a_worker_has_the_environment_and_folder_of_its_pools_maker_not_its_servers(
+    tmp_path, monkeypatch
+) -> None:
+    name = "VIRTUS_TEST_POOL_VALUE"
+    monkeypatch.setenv(name, "first")
+    with pinned_pool(1) as pool:  # starts the fork server (once a process) if not started
+        assert pool.submit(_surroundings, name).result()["value"] == "first"
+    monkeypatch.setenv(name, "second")
+    monkeypatch.chdir(tmp_path)
+    with pinned_pool(1, ("GPU-a",)) as pool:
+        seen = pool.submit(_surroundings, name).result()
+    assert seen["value"] == "second" and seen["cwd"] == str(tmp_path)
+    assert seen["renderer_loaded"] == []  # the server never imports the renderer
+    monkeypatch.delenv(name)
+    with pinned_pool(1) as pool:
+        assert pool.submit(_surroundings, name).result()["value"] is None
+
+
+#: ``python -c`` program: a pool of one worker set up as a run's (dying with its maker),
+#: whose maker prints the worker's process id and is then killed by SIGKILL.
+_KILLED_MAKER = """
+import os, signal
+from virtus.data.devices import pinned_pool
+from virtus.data.shardtask import worker_init
+pool = pinned_pool(1, ("GPU-a",), worker_init, (1,))
+print(pool.submit(os.getpid).result(), flush=True)
+os.kill(os.getpid(), signal.SIGKILL)
+"""
+
+
+def test_a_worker_dies_with_the_process_that_made_its_pool() -> None:
+    import signal
+    import subprocess
+
+    # run() returns once every holder of the output pipes -- the worker and the fork server
+    # among them -- has ended; the timeout is a safety net, not a timing assumption.
+    killed = subprocess.run(
+        [sys.executable, "-c", _KILLED_MAKER], capture_output=True, text=True, timeout=120
+    )
+    assert killed.returncode == -signal.SIGKILL, killed.stderr
+    worker = int(killed.stdout.split()[0])
+    deadline = time.monotonic() + 60
+    while Path(f"/proc/{worker}").exists() and time.monotonic() < deadline:
+        time.sleep(0.05)  # ended, but perhaps not yet reaped by its parent
+    assert not Path(f"/proc/{worker}").exists() or _state(worker) == "Z"
+
+
+def _state(pid: int) -> str:
+    """A process's state letter (``/proc/<pid>/stat``; "" once it is gone)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return ""

@@ -17,7 +17,9 @@ One concept per module:
   (:func:`generate`), resumable after any interruption.
 * :mod:`virtus.data.shardtask` -- one shard task: render, label and write a shard's
   samples, wherever it runs; :mod:`virtus.data.devicebuffers` -- the device and
-  page-locked buffers of samples made and compressed on a GPU.
+  page-locked buffers of samples made and compressed on a GPU;
+  :mod:`virtus.data.workerimports` -- what a worker needs, imported once by the server
+  that forks the workers.
 * :mod:`virtus.data.loaders` -- :class:`FringeDataset` (PyTorch map-style; torch optional).
 * :mod:`virtus.data.export` -- WebDataset tar shards (:func:`export_webdataset`).
 * :mod:`virtus.data.mlbench` -- FPP-ML-Bench's layout (:func:`export_fpp_ml_bench`) and the

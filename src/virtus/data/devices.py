@@ -1,9 +1,9 @@
 """GPUs for dataset workers: which are visible, how many a run uses, which worker gets which.
 
 A dataset run on a host with several GPUs starts one or more worker processes per GPU and
-pins each to its GPU through ``CUDA_VISIBLE_DEVICES``, set in the spawned process before
-Mitsuba or Dr.Jit is imported (the CUDA driver reads it once, when it starts). Nothing here
-imports torch, Mitsuba or Dr.Jit.
+pins each to its GPU through ``CUDA_VISIBLE_DEVICES``, set in the worker before Mitsuba or
+Dr.Jit is imported and before anything starts CUDA (the CUDA driver reads it once, when it
+starts). Nothing here imports torch, Mitsuba or Dr.Jit.
 
 * :func:`visible_gpus` -- the GPUs this process may use, as ``CUDA_VISIBLE_DEVICES``
   entries: ``$VIRTUS_FAKE_GPUS`` (a testing hook, below), else ``$CUDA_VISIBLE_DEVICES``
@@ -12,8 +12,10 @@ imports torch, Mitsuba or Dr.Jit.
   ``--workers-per-gpu``: worker ``k`` renders on GPU ``k mod G`` of the ``G`` used
   (:func:`assign`), and the CPU threads each worker uses to synthesise, checksum and
   compress are the process's cores shared out (``cores // workers``).
-* :func:`pinned_pool` -- a process pool (spawn) whose ``k``-th worker is given its device
-  by the pool initializer, from a counter shared by the workers.
+* :func:`pinned_pool` -- a process pool whose ``k``-th worker is given its device by the
+  pool initializer, from a counter shared by the workers. Workers are forked from a server
+  process that has imported what they need (:mod:`virtus.data.workerimports`; Linux's
+  ``forkserver``), else spawned.
 
 Testing hook: ``VIRTUS_FAKE_GPUS=N`` makes ``N`` GPUs named ``"0"`` .. ``"N-1"`` visible,
 so the assignment, the pinned pools and the resulting stores can be tested on a machine
@@ -64,6 +66,8 @@ MAX_GPUS = 256
 _NVIDIA_SMI_TIMEOUT_S = 20.0
 #: A ``CUDA_VISIBLE_DEVICES`` entry: an ordinal or a GPU/MIG UUID (prefix).
 _ENTRY = re.compile(r"\d+|(GPU|MIG)-[0-9A-Za-z/-]+")
+#: The module the server that forks a pool's workers imports first (:func:`pinned_pool`).
+WORKER_IMPORTS = "virtus.data.workerimports"
 #: In a pinned worker: what :func:`_pin` did (see :func:`pinned`).
 _PINNED: dict[str, Any] | None = None
 
@@ -267,11 +271,18 @@ def _described(visible: Sequence[str]) -> str:
 
 
 def _pin(
-    counter: Any, devices: tuple[str, ...], then: Callable[..., None] | None, args: tuple
-) -> None:
-    """Pool initializer: take the next worker index from ``counter``; pin the process to
-    its device (``CUDA_VISIBLE_DEVICES``, before anything may start CUDA); run ``then``."""
+    counter: Any, devices: tuple[str, ...], then: Callable[..., None] | None, args: tuple,
+    environ: dict[str, str] | None = None, maker: int | None = None,
+) -> None:  # fmt: skip
+    """Pool initializer: take on the pool's maker's ``environ`` (a forked worker has its
+    server's, taken when the server started); take the next worker index from
+    ``counter``; pin the process to its device (``CUDA_VISIBLE_DEVICES``, before anything
+    may start CUDA); remember the ``maker``'s process id (:func:`die_with_pool_maker`);
+    run ``then``."""
     global _PINNED
+    if environ is not None:
+        os.environ.clear()
+        os.environ.update(environ)
     with counter.get_lock():
         index = counter.value
         counter.value += 1
@@ -283,7 +294,9 @@ def _pin(
     _PINNED = {
         "index": index,
         "device": device,
-        "renderer_loaded": sorted(m for m in ("drjit", "mitsuba", "torch") if m in sys.modules),
+        "maker": maker,
+        "renderer_loaded": sorted(m for m in ("drjit", "mitsuba") if m in sys.modules),
+        "cuda_started": _cuda_started(),
         # Workers sharing a GPU wait for it most of the time: asleep, not spinning on cores.
         "blocking_waits": device is not None and block_while_waiting(),
     }
@@ -291,12 +304,86 @@ def _pin(
         then(*args)
 
 
+def _cuda_started() -> bool:
+    """Whether torch has started CUDA in this process (the fork server may have imported
+    torch, which loads the CUDA driver library but does not start it)."""
+    torch = sys.modules.get("torch")
+    return torch is not None and bool(torch.cuda.is_initialized())
+
+
+def die_with_pool_maker() -> None:
+    """Be killed (SIGKILL) as soon as the process that made this worker's pool ends (the
+    parent outside a :func:`pinned_pool`), so that a killed run leaves no worker writing
+    into its store (Linux; elsewhere nothing is done).
+
+    A pool's task queues are pipes every worker also holds the writing end of, so a worker
+    is not told that its maker has gone. Where the maker is the parent, the kernel sends
+    the signal (``PR_SET_PDEATHSIG``); a worker forked by the fork server (whose parent is
+    the server, which lives as long as any of its children) is killed by a daemon thread
+    waiting on the maker (a pidfd, which is readable once it has ended)."""
+    import signal
+    import threading
+
+    maker = (_PINNED or {}).get("maker") or os.getppid()
+    if maker == os.getppid():
+        try:
+            import ctypes
+
+            ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            return
+        if os.getppid() != maker:  # it ended before the request
+            os.kill(os.getpid(), signal.SIGKILL)
+        return
+    try:
+        handle = os.pidfd_open(maker)
+    except ProcessLookupError:
+        os.kill(os.getpid(), signal.SIGKILL)
+    except (OSError, AttributeError):  # no pidfd here (kernel before 5.3, not Linux)
+        return
+    threading.Thread(
+        target=_die_when_readable, args=(handle,), name="virtus-die-with-maker", daemon=True
+    ).start()
+
+
+def _die_when_readable(handle: int) -> None:
+    """Kill this process once ``handle`` (a pidfd) is readable: its process has ended."""
+    import select
+    import signal
+
+    select.select([handle], [], [])
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
 def pinned() -> dict[str, Any] | None:
     """In a worker of :func:`pinned_pool`: its ``index``, its ``device`` (None on CPU),
+    ``maker``, the process id of the process that made the pool,
     ``renderer_loaded``, the renderer modules already imported when it was pinned (none),
+    ``cuda_started``, whether CUDA had started by then (never),
     and ``blocking_waits``, whether its threads sleep while they wait for the GPU
     (:func:`virtus.data.cudadriver.block_while_waiting`); None in any other process."""
     return None if _PINNED is None else dict(_PINNED)
+
+
+def start_worker_server() -> None:
+    """Start the fork server of :func:`pinned_pool` now, where there is one: it imports
+    :data:`WORKER_IMPORTS` while the caller goes on (a run checks its inputs and probes the
+    GPU meanwhile), and the pool made later finds it ready. Nothing is done where workers
+    are spawned or the server already runs."""
+    if _context().get_start_method() == "forkserver":
+        import multiprocessing.forkserver
+
+        multiprocessing.forkserver.ensure_running()
+
+
+def _context() -> Any:
+    """The multiprocessing context of :func:`pinned_pool`'s workers: the fork server's
+    (importing :data:`WORKER_IMPORTS` first) where the platform has one, else spawn's."""
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return multiprocessing.get_context("spawn")
+    context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload([WORKER_IMPORTS])
+    return context
 
 
 def pinned_pool(
@@ -305,17 +392,22 @@ def pinned_pool(
     initializer: Callable[..., None] | None = None,
     initargs: tuple = (),
 ) -> ProcessPoolExecutor:
-    """A pool of ``workers`` spawned processes; the ``k``-th started is pinned to
+    """A pool of ``workers`` processes; the ``k``-th started is pinned to
     ``devices[k mod G]`` (:func:`assign`; none when ``devices`` is empty), then runs
-    ``initializer(*initargs)``. Spawned, not forked: a fork would inherit this process's
+    ``initializer(*initargs)``. Each worker has this process's environment, working
+    folder and ``sys.path``.
+
+    The workers are forked from multiprocessing's fork server, which imports
+    :data:`WORKER_IMPORTS` once when it starts (the first pool of this process starts it),
+    where the platform has one; else spawned. Never forked from this process: it may hold
     CUDA state and threads.
 
     ``initializer`` and the tasks must be importable functions (they are pickled by name).
     """
     _count("workers", workers)
-    context = multiprocessing.get_context("spawn")
+    context = _context()
     counter = context.Value("i", 0)
     return ProcessPoolExecutor(
         workers, mp_context=context, initializer=_pin,
-        initargs=(counter, tuple(devices), initializer, initargs),
+        initargs=(counter, tuple(devices), initializer, initargs, dict(os.environ), os.getpid()),
     )  # fmt: skip

@@ -350,6 +350,8 @@ def generate(
     """
     config = config.with_num_samples(num)
     placement = None if ray is not None else _devices.plan(workers, gpus, workers_per_gpu)
+    if placement is not None and placement.workers > 1:
+        _devices.start_worker_server()  # its imports overlap the checks below
     out = Path(out)
     layout, shard_bytes = _layout(config, out)
     if out.exists() and not out.is_dir():

@@ -484,18 +484,12 @@ def worker_init(threads: int, die_with_parent: bool = True) -> None:
     """In a worker process (after :func:`virtus.data.devices.pinned_pool` pinned it to its
     GPU, or in a Ray actor): use ``threads`` CPU threads to synthesise, checksum and
     compress; keep one shard buffer from task to task; with ``die_with_parent`` die with
-    the parent (Linux), so a killed ``generate`` leaves no orphan writing into the store."""
+    the process that made the pool (:func:`virtus.data.devices.die_with_pool_maker`), so
+    a killed ``generate`` leaves no orphan writing into the store."""
     global _IN_WORKER, _WORKER_THREADS
     _IN_WORKER = True
     _WORKER_THREADS = threads
     # More compression threads than the worker's share of the cores only add memory in flight.
     _store_module.limit_write_threads(threads)
-    if not die_with_parent:
-        return
-    try:
-        import ctypes
-        import signal
-
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        pass
+    if die_with_parent:
+        _devices.die_with_pool_maker()
