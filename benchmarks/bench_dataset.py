@@ -124,13 +124,25 @@ def config_file(
 
 
 def cpu_seconds() -> float:
-    """CPU seconds (user + system) used so far by this process and its finished workers."""
+    """CPU seconds (user + system) used so far by this process and its finished workers:
+    spawned workers are its children; forked ones are the fork server's
+    (:func:`virtus.data.devices.pinned_pool`), counted with the server's own start-up
+    through its ``/proc`` record (it reaps them)."""
+    import multiprocessing.forkserver
     import resource
 
     total = 0.0
     for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN):
         usage = resource.getrusage(who)
         total += usage.ru_utime + usage.ru_stime
+    server = getattr(multiprocessing.forkserver._forkserver, "_forkserver_pid", None)
+    if server is not None:
+        try:
+            stat = Path(f"/proc/{server}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            return total
+        # fields 14-17 of proc(5): utime, stime, cutime, cstime, counted from "state" (3)
+        total += sum(int(v) for v in stat[11:15]) / os.sysconf("SC_CLK_TCK")
     return total
 
 

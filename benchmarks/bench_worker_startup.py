@@ -10,7 +10,10 @@ a run's rate over the whole run and in its steady part).
 This benchmark makes a small store of the training configuration of
 ``bench_dataset.py`` (960 x 960, 52 frames, ``shuffle-zstd``; ``--compress-on gpu`` where
 nvCOMP and a GPU are here) in this process, then starts ``--processes`` worker processes
-at once (and then one alone), each timing its steps: imports of ``virtus.data``, Mitsuba's
+at once (and then one alone), spawned and then forked from a fork server that has
+imported :mod:`virtus.data.workerimports` (as :func:`virtus.data.devices.pinned_pool`
+starts a run's workers; the server starts in the first forked run and its start counts
+in that run's wall time), each timing its steps: imports of ``virtus.data``, Mitsuba's
 variant, torch and its CUDA context (where Mitsuba renders on a GPU), the store and its
 randomiser, the compressor, the shard buffers (device and page-locked ones on the GPU
 path), the first shard and a second one (each re-rendered and rewritten: the same bytes).
@@ -84,9 +87,14 @@ def worker(path: str, digest: str, shards: tuple[int, int], num: int, out: objec
     out.put([b - a for a, b in zip(marks, marks[1:], strict=False)])  # type: ignore[attr-defined]
 
 
-def start(count: int, path: Path, digest: str, num: int, shards: int) -> dict:
-    """``count`` workers started at once: the range of each step and the wall time."""
-    context = multiprocessing.get_context("spawn")
+def start(count: int, path: Path, digest: str, num: int, shards: int, method: str) -> dict:
+    """``count`` workers started at once by ``method`` (``"spawn"`` or ``"forkserver"``):
+    the range of each step and the wall time."""
+    from virtus.data.devices import WORKER_IMPORTS
+
+    context = multiprocessing.get_context(method)
+    if method == "forkserver":
+        context.set_forkserver_preload([WORKER_IMPORTS])
     queue = context.Queue()
     begin = time.perf_counter()
     processes = [
@@ -102,6 +110,7 @@ def start(count: int, path: Path, digest: str, num: int, shards: int) -> dict:
         process.join()
     wall = time.perf_counter() - begin
     return {
+        "start": method,
         "processes": count,
         "wall_s": round(wall, 2),
         "steps_s": {
@@ -139,12 +148,16 @@ def main() -> None:
         digest = DatasetStore.open(folder / "store").digest
         shards = samples // shard
         runs = [
-            start(count, folder / "store", digest, samples, shards)
+            start(count, folder / "store", digest, samples, shards, method)
+            for method in ("spawn", "forkserver")
             for count in dict.fromkeys((args.processes, 1))
         ]
     result = {"compress_on": on, "store_s": round(made, 2), "runs": runs}
     for run in runs:
-        print(f"{run['processes']} processes at once: {run['wall_s']} s", file=sys.stderr)
+        print(
+            f"{run['processes']} processes at once, {run['start']}: {run['wall_s']} s",
+            file=sys.stderr,
+        )
         for step, (low, high) in run["steps_s"].items():
             print(f"  {step:28s} {low:7.3f} - {high:7.3f} s", file=sys.stderr)
     print(json.dumps(result, indent=2))
