@@ -19,11 +19,15 @@ numcodecs codec (:meth:`ShardEncoder.encode`) or, for zstd, from a batch compres
 encodes many chunks at once (nvCOMP on a GPU: :meth:`ShardEncoder.raw` gives it a chunk's
 bytes, :meth:`ShardEncoder.write` takes what it made). :meth:`ShardEncoder.for_array`
 returns None for any other array (the caller writes through Zarr).
+
+Each shard file is handed to the disk as soon as it is written (:func:`start_writeback`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,6 +46,39 @@ _ABSENT = np.uint64(2**64 - 1)
 #: stops at the first block with another value: one block for almost every chunk).
 _FILL_BLOCK = 1 << 18
 _BLOSC_SHUFFLE = {"noshuffle": 0, "shuffle": 1, "bitshuffle": 2}
+#: ``sync_file_range`` flag: start writing the range's dirty pages, do not wait for them.
+_SYNC_FILE_RANGE_WRITE = 2
+
+
+def start_writeback(handle: Any) -> None:
+    """Ask the kernel to start writing an open file's data to its disk now, without waiting
+    for it (Linux ``sync_file_range(SYNC_FILE_RANGE_WRITE)``; nothing where there is none,
+    and nothing on a file system in memory). The file is flushed first.
+
+    Left to the page cache, a run's shards pile up as GBs of dirty pages until the kernel
+    writes them out at once, and meanwhile ext4 holds every writer's file creations and
+    renames behind that flush: in a GPU run at 1.6 GB/s, 10.5 GB of dirty pages, then
+    three seconds of 1.7-2.0 GB/s out with 8 workers blocked and the cores 1-9 % busy
+    (``vmstat``). Started file by file, the writes go out while the next shards render.
+    Not ``fsync``: nothing waits for the disk, and a file's durability is unchanged (the
+    store's records are what a run trusts, :mod:`virtus.data.store`).
+    """
+    handle.flush()
+    call = _sync_file_range()
+    if call is not None:
+        call(handle.fileno(), 0, 0, _SYNC_FILE_RANGE_WRITE)  # an error only loses the hint
+
+
+@functools.cache
+def _sync_file_range() -> Any:
+    """libc's ``sync_file_range`` through ctypes, or None where the C library has none."""
+    try:
+        call = ctypes.CDLL(None, use_errno=True).sync_file_range
+    except (OSError, AttributeError):
+        return None
+    call.argtypes = (ctypes.c_int, ctypes.c_int64, ctypes.c_int64, ctypes.c_uint)
+    call.restype = ctypes.c_int
+    return call
 
 
 def _compressor(codec: dict[str, Any]) -> Any:
@@ -223,6 +260,7 @@ class ShardEncoder:
                 for data in present:
                     handle.write(data)
                 handle.write(index)
+                start_writeback(handle)
 
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write(path, fill)
