@@ -157,8 +157,8 @@ NVCOMP_REQUIREMENT = "nvidia-nvcomp-cu13==6.0.0.12"
 #: blosc-zstd (blosc-auto: 1.6x faster, 6 % smaller). A store keeps the block size it was
 #: made with (it is in each array's Zarr metadata, which the shard writer follows).
 BLOSC_BLOCK_BYTES = 1 << 20
-#: Testing hook: ``1`` makes :class:`CpuZstdFrames` stand in for nvCOMP (in spawned workers
-#: too), so the GPU path -- plan, batch, pieces, records -- runs in CI without a GPU.
+#: Testing hook: ``1`` makes :class:`CpuZstdFrames` stand in for nvCOMP (in worker
+#: processes too), so the GPU path -- plan, batch, pieces, records -- runs in CI without a GPU.
 FAKE_NVCOMP_ENV = "VIRTUS_FAKE_NVCOMP"
 #: zarr-python's warning for ``numcodecs.*`` codecs (``shuffle-zstd``), said once here.
 _NUMCODECS_WARNING = "Numcodecs codecs are not in the Zarr version 3 specification"

@@ -16,8 +16,9 @@
    (:mod:`virtus.data.shardtask`: :func:`render_shard`, the shard's record written last),
    idempotent, so a retried or repeated task writes the same bytes. Tasks run in this
    process (``workers=1``: rendering, labelling and writing side by side on three
-   threads, :func:`~virtus.data.shardtask.run_pipelined`), in ``workers`` spawned
-   processes (a few consecutive shards a task, :func:`_next_task`, each written while the
+   threads, :func:`~virtus.data.shardtask.run_pipelined`), in ``workers`` worker
+   processes (forked from a server started as the run begins, which has imported what
+   they need; a few consecutive shards a task, :func:`_next_task`, each written while the
    next renders, :func:`~virtus.data.shardtask.render_shards`; on a host with GPUs each
    worker is pinned to one, :mod:`virtus.data.devices`, and uses its share of the cores),
    or on Ray (:mod:`virtus.data.raycluster`: CPU tasks, or one actor per GPU share).
@@ -165,7 +166,7 @@ def _run_local(
     path: Path, shards: list[int], num: int, digest: str, placement: Placement,
     tick: Callable, pipelined: bool,
 ) -> Iterator[dict[str, Any]]:  # fmt: skip
-    """The shards in this process (one worker) or in ``placement.workers`` spawned
+    """The shards in this process (one worker) or in ``placement.workers`` worker
     processes, each pinned to its GPU (:func:`virtus.data.devices.pinned_pool`). A worker's
     task is a few consecutive shards (:func:`_next_task`); workers pinned to GPUs write
     each while the next renders when two shards fit in memory (``pipelined``,
