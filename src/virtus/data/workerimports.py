@@ -2,9 +2,9 @@
 forks the workers (multiprocessing's fork server, :func:`virtus.data.devices.pinned_pool`)
 instead of once by each of them.
 
-Eight workers started at once on a 16-core GPU host each spent 1.3-1.8 s importing
-``virtus.data`` and 3.6-4.9 s importing torch (``benchmarks/bench_worker_startup.py``);
-forked from a server that has imported them, a worker starts with them in memory.
+Eight workers spawned at once on a 16-core H100 host each spent 4.7-7.8 s importing
+``virtus.data`` and torch (with torch's CUDA context), forked from a server that had
+imported them 0.1-0.2 s (``benchmarks/bench_worker_startup.py --processes 8``).
 
 Nothing here may start CUDA or a thread that a fork would lose: Dr.Jit starts a thread
 when it is imported and Mitsuba imports Dr.Jit, so each worker imports those itself,
