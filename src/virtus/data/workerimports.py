@@ -19,6 +19,7 @@ import contextlib
 import importlib
 
 import numcodecs  # noqa: F401
+import trimesh  # noqa: F401  (free-form and mesh-folder objects)
 import zarr  # noqa: F401
 
 import virtus.data.shardtask  # noqa: F401

@@ -19,12 +19,15 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import trimesh
 
 from virtus.checks import as_rng, positive, positive_int
 from virtus.errors import InputError
+
+if TYPE_CHECKING:
+    import trimesh
 
 __all__ = ["FREEFORM_SEED", "freeform_object", "write_freeform_object"]
 
@@ -62,6 +65,8 @@ def freeform_object(
         raise InputError("subdivisions", "at most 8 (1.3 M faces)", subdivisions)
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
         raise InputError("seed", "an integer", seed)
+    import trimesh  # here: importing it (and networkx) costs every ``virtus.scene`` user ~0.6 s
+
     rng = as_rng(int(seed))
     sphere = trimesh.creation.icosphere(subdivisions=subdivisions, radius=1.0)
     d = np.asarray(sphere.vertices, dtype=np.float64)
