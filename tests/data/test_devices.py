@@ -224,6 +224,7 @@ os.kill(os.getpid(), signal.SIGKILL)
 """
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 def test_a_worker_dies_with_the_process_that_made_its_pool() -> None:
     import signal
     import subprocess
