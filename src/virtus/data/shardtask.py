@@ -37,7 +37,7 @@ from virtus.data.devicebuffers import (
 )
 from virtus.data.labels import sample_arrays
 from virtus.data.sampling import Randomiser, SampleSpec
-from virtus.data.store import ASSETS_DIR, DatasetStore, EncodedSample
+from virtus.data.store import ASSETS_DIR, DatasetStore, EncodedSample, slot_views
 from virtus.errors import InputError
 
 __all__ = [
@@ -129,13 +129,8 @@ def _label(
 ) -> float:
     """Write a sample's arrays into slot ``slot`` of a shard buffer; returns the seconds."""
     begin = time.perf_counter()
-    sample_arrays(capture, spec, store.layout, _slot(buffer, slot))
+    sample_arrays(capture, spec, store.layout, slot_views(buffer, slot))
     return time.perf_counter() - begin
-
-
-def _slot(buffer: dict[str, np.ndarray], slot: int) -> dict[str, np.ndarray]:
-    """One sample's arrays (views) in a shard buffer."""
-    return {name: b[slot] for name, b in buffer.items()}
 
 
 def _label_and_encode(
@@ -144,15 +139,15 @@ def _label_and_encode(
     """:func:`_label`, then the sample's checksum and chunks
     (:meth:`~virtus.data.store.DatasetStore.encode_sample`)."""
     seconds = _label(store, spec, capture, buffer, slot)
-    return seconds, store.encode_sample(_slot(buffer, slot))
+    return seconds, store.encode_sample(slot_views(buffer, slot))
 
 
 def _encode(store: DatasetStore, buffers: _Buffers, slot: int) -> tuple[float, EncodedSample]:
     """:func:`_label_and_encode` of a sample labelled already (on the device; the
     compressor reads the device's copy where the buffers have one)."""
     host, device = buffers
-    on_device = None if device is None else _slot(device, slot)
-    return 0.0, store.encode_sample(_slot(host, slot), on_device)
+    on_device = None if device is None else slot_views(device, slot)
+    return 0.0, store.encode_sample(slot_views(host, slot), on_device)
 
 
 def _labels_on_device() -> bool:
@@ -194,8 +189,8 @@ def _render_and_label(
         spec.scene, cam2world=spec.cam2world, rng=spec.capture_seed
     )
     middle = time.perf_counter()
-    on = None if device is None else _slot(device, slot)
-    device_sample_arrays(rendering, spec, store.layout, _slot(buffer, slot), on_device=on)
+    on = None if device is None else slot_views(device, slot)
+    device_sample_arrays(rendering, spec, store.layout, slot_views(buffer, slot), on_device=on)
     return sample_meta(spec, rendering.metadata()), middle - begin, time.perf_counter() - middle
 
 

@@ -85,6 +85,7 @@ __all__ = [
     "DatasetStore",
     "EncodedSample",
     "VerifyReport",
+    "slot_views",
     "zarr_compressor",
 ]
 
@@ -116,6 +117,12 @@ def limit_write_threads(threads: int) -> None:
     worker's share of the cores; never more than the default)."""
     global _WRITE_THREADS
     _WRITE_THREADS = max(1, min(_WRITE_THREADS, threads))
+
+
+def slot_views(buffer: dict[str, Any], slot: int) -> dict[str, Any]:
+    """Sample ``slot``'s arrays in a shard buffer (:meth:`DatasetStore.shard_buffer`, or
+    its device twin of torch tensors): name -> view, no copy."""
+    return {name: block[slot] for name, block in buffer.items()}
 
 
 def _timed(work: Callable[..., Any], *args: Any) -> tuple[Any, float]:
@@ -456,7 +463,7 @@ class DatasetStore:
                 if batch is not None:  # the shard's chunks in one batch, here (nvCOMP)
                     device = None
                     if on_device is not None:
-                        device = [{n: a[k] for n, a in on_device.items()} for k in range(count)]
+                        device = [slot_views(on_device, k) for k in range(count)]
                     done, seconds = _timed(_codecs.encode_samples, encoders, samples, batch, device)
                     timing["compression"] += seconds
                     encoded = [EncodedSample("", chunks, {}) for chunks in done]
