@@ -240,13 +240,10 @@ def _staging_device(store: DatasetStore) -> str | None:
     """Where this process keeps its samples for the compressor
     (:func:`virtus.data.devicebuffers.staging_device`): the rendering device when samples
     are labelled there and the store's batch compressor reads its tensors, else None."""
-    on_device = _labels_on_device()
-    if not on_device:
-        return None
     from virtus.render.backend import on_gpu
 
     rendering_device = "cuda" if on_gpu() else "cpu"
-    return staging_device(store.batch_compressor(), on_device, rendering_device)
+    return staging_device(store.batch_compressor(), _labels_on_device(), rendering_device)
 
 
 def _new_shard_buffers(store: DatasetStore) -> _Buffers:
