@@ -88,13 +88,12 @@ def worker(path: str, digest: str, shards: tuple[int, int], num: int, out: objec
 
 
 def start(count: int, path: Path, digest: str, num: int, shards: int, method: str) -> dict:
-    """``count`` workers started at once by ``method`` (``"spawn"`` or ``"forkserver"``):
-    the range of each step and the wall time."""
-    from virtus.data.devices import WORKER_IMPORTS
+    """``count`` workers started at once by ``method``: ``"spawn"``, or ``"pool"`` as
+    :func:`virtus.data.devices.pinned_pool` starts them (its context; the fork server where
+    there is one). The range of each step and the wall time."""
+    from virtus.data.devices import worker_context
 
-    context = multiprocessing.get_context(method)
-    if method == "forkserver":
-        context.set_forkserver_preload([WORKER_IMPORTS])
+    context = multiprocessing.get_context("spawn") if method == "spawn" else worker_context()
     queue = context.Queue()
     begin = time.perf_counter()
     processes = [
@@ -110,7 +109,7 @@ def start(count: int, path: Path, digest: str, num: int, shards: int, method: st
         process.join()
     wall = time.perf_counter() - begin
     return {
-        "start": method,
+        "start": context.get_start_method(),
         "processes": count,
         "wall_s": round(wall, 2),
         "steps_s": {
@@ -149,7 +148,7 @@ def main() -> None:
         shards = samples // shard
         runs = [
             start(count, folder / "store", digest, samples, shards, method)
-            for method in ("spawn", "forkserver")
+            for method in ("spawn", "pool")
             for count in dict.fromkeys((args.processes, 1))
         ]
     result = {"compress_on": on, "store_s": round(made, 2), "runs": runs}

@@ -45,12 +45,15 @@ __all__ = [
     "Placement",
     "assign",
     "cpu_cores",
+    "die_with_pool_maker",
     "gpu_count",
     "pinned",
     "pinned_pool",
     "plan",
+    "start_worker_server",
     "variant_forces_cpu",
     "visible_gpus",
+    "worker_context",
 ]
 
 #: Testing hook: an integer ``N`` makes ``N`` fake GPUs ``"0"`` .. ``"N-1"`` visible.
@@ -370,14 +373,15 @@ def start_worker_server() -> None:
     :data:`WORKER_IMPORTS` while the caller goes on (a run checks its inputs and probes the
     GPU meanwhile), and the pool made later finds it ready. Nothing is done where workers
     are spawned or the server already runs."""
-    if _context().get_start_method() == "forkserver":
+    if worker_context().get_start_method() == "forkserver":
         import multiprocessing.forkserver
 
         multiprocessing.forkserver.ensure_running()
 
 
-def _context() -> Any:
-    """The multiprocessing context of :func:`pinned_pool`'s workers: the fork server's
+def worker_context() -> Any:
+    """The multiprocessing context of :func:`pinned_pool`'s workers (also for benchmarks
+    that start workers as a run does): the fork server's
     (importing :data:`WORKER_IMPORTS` first) where the platform has one, else spawn's."""
     if "forkserver" not in multiprocessing.get_all_start_methods():
         return multiprocessing.get_context("spawn")
@@ -405,7 +409,7 @@ def pinned_pool(
     ``initializer`` and the tasks must be importable functions (they are pickled by name).
     """
     _count("workers", workers)
-    context = _context()
+    context = worker_context()
     counter = context.Value("i", 0)
     return ProcessPoolExecutor(
         workers, mp_context=context, initializer=_pin,
