@@ -284,6 +284,19 @@ def fake_nvcomp(monkeypatch):
     return _FakeNvcomp
 
 
+def test_planning_gpu_compression_does_not_import_torch(fake_nvcomp, monkeypatch) -> None:
+    """The compressor that :func:`plan_compression` makes only to see that nvCOMP works
+    looks for torch (seconds to import on a GPU host) only when it first stages chunks."""
+    looked = []
+    monkeypatch.setattr(codecs, "_staging_torch", lambda: looked.append(1) or (None, None))
+    assert codecs.plan_compression("zstd", "gpu").on == "gpu"
+    gpu = codecs.NvcompZstdFrames(piece_bytes=1008)
+    assert not looked
+    chunk = fringe_like(np.uint16, seed=1).reshape(-1).view(np.uint8)
+    gpu.encode_chunks([chunk], [2])
+    assert gpu.torch_device is None and looked == [1]  # once per compressor
+
+
 @pytest.mark.parametrize("driver_copies", [False, True])
 def test_the_nvcomp_flow_gives_the_cpu_twins_bytes(fake_nvcomp, monkeypatch, driver_copies) -> None:
     """Through a stand-in for nvCOMP that compresses each piece as numcodecs does, the GPU

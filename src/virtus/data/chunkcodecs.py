@@ -97,6 +97,7 @@ GB/s for every algorithm: it measured the copy, not the encoders.)
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import warnings
 from collections.abc import Iterator, Sequence
@@ -393,10 +394,23 @@ class NvcompZstdFrames:
         self._local = threading.local()
         self._codec()  # fails here, not in the first shard, without a usable device
         self.name = f"nvcomp {self._nvcomp.__version__}"
-        #: torch and the device where the chunks are staged (a CUDA build of torch and
-        #: ``"cuda"``; (None, None) without one: staged on the host), whose tensors
-        #: :meth:`encode_chunks` also reads.
-        self._torch, self.torch_device = _staging_torch()
+
+    @functools.cached_property
+    def _torch_staging(self) -> tuple[Any, str | None]:
+        """torch and the device where the chunks are staged (a CUDA build of torch and
+        ``"cuda"``; (None, None) without one: staged on the host), found on first use:
+        importing torch takes seconds (4-5 s on an H100 host), and the compressor that
+        :func:`plan_compression` makes only to see that nvCOMP works never encodes."""
+        return _staging_torch()
+
+    @property
+    def _torch(self) -> Any:
+        return self._torch_staging[0]
+
+    @property
+    def torch_device(self) -> str | None:
+        """The torch device whose tensors :meth:`encode_chunks` reads (None: host only)."""
+        return self._torch_staging[1]
 
     def _codec(self) -> Any:
         """This thread's nvCOMP Zstd codec (RAW bitstream), made on first use."""
