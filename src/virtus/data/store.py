@@ -357,9 +357,12 @@ class DatasetStore:
                 out[int(meta["index"])] = {**meta, "shard": shard}
         return dict(sorted(out.items()))
 
-    def missing_shards(self, num_samples: int) -> list[int]:
-        """Shards of ``[0, num_samples)`` without a record listing all their samples."""
-        records = self.records()
+    def missing_shards(
+        self, num_samples: int, records: dict[int, dict[str, Any]] | None = None
+    ) -> list[int]:
+        """Shards of ``[0, num_samples)`` without a record listing all their samples
+        (``records``: :meth:`records`, read here when not given)."""
+        records = self.records() if records is None else records
         todo = []
         for shard in range(self.shard_count(num_samples)):
             start, stop = self.shard_bounds(shard, num_samples)
