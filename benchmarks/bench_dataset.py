@@ -124,13 +124,17 @@ def config_file(
 
 
 def cpu_seconds() -> float:
-    """CPU seconds (user + system) used so far by this process and its finished workers:
-    spawned workers are its children; forked ones are the fork server's
-    (:func:`virtus.data.devices.pinned_pool`), counted with the server's own start-up
-    through its ``/proc`` record (it reaps them)."""
+    """CPU seconds (user + system) used so far by this process and its finished workers
+    (once they have exited: :func:`virtus.data.generate.wait_for_workers`, which also keeps
+    one run's exiting workers out of the next run's time): spawned workers are its
+    children; forked ones are the fork server's (:func:`virtus.data.devices.pinned_pool`),
+    counted with the server's own start-up through its ``/proc`` record (it reaps them)."""
     import multiprocessing.forkserver
     import resource
 
+    from virtus.data.generate import wait_for_workers
+
+    wait_for_workers()
     total = 0.0
     for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN):
         usage = resource.getrusage(who)

@@ -5,16 +5,18 @@ bad ``--gpus`` / ``--workers-per-gpu`` values are refused in one line before any
 
 from __future__ import annotations
 
+import multiprocessing.forkserver
 import signal
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
 from tests.data.test_dataset import run_cli, store_files, tiny_config
 from virtus.data import DatasetStore, generate, load_config
 from virtus.data.devices import CUDA_ENV, FAKE_GPUS_ENV
-from virtus.data.generate import _TASK_SHARDS
+from virtus.data.generate import _TASK_SHARDS, wait_for_workers
 
 
 def test_two_pinned_gpus_make_the_one_gpu_store(tmp_path, monkeypatch) -> None:
@@ -30,6 +32,22 @@ def test_two_pinned_gpus_make_the_one_gpu_store(tmp_path, monkeypatch) -> None:
     assert set(two.shard_devices.values()) <= {"0", "1"}
     assert two.to_dict()["shard_devices"] == {str(k): v for k, v in two.shard_devices.items()}
     assert DatasetStore.open(tmp_path / "two").verify().ok
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux's fork server, /proc")
+def test_wait_for_workers_returns_once_a_runs_workers_have_exited(tmp_path) -> None:
+    """generate reports a run once every shard is recorded, without waiting for its worker
+    processes to exit; wait_for_workers waits for them (the worker server, which forked
+    them, then has no child left)."""
+    config = load_config(tiny_config(tmp_path, num_samples=8, storage={"shard_samples": 2}))
+    report = generate(config, tmp_path / "store", workers=2)
+    assert (report.complete, report.rendered) == (8, 8)
+    assert report.encoders == {name: 4 for name in report.encoders} and len(report.encoders) == 1
+    wait_for_workers()
+    server = multiprocessing.forkserver._forkserver._forkserver_pid
+    assert Path(f"/proc/{server}/task/{server}/children").read_text().split() == []
+    again = generate(config, tmp_path / "store", workers=2)  # complete: nothing to render
+    assert (again.complete, again.rendered) == (8, 0)
 
 
 #: ``python -c`` program: the CLI (arguments after the kill count) killed by SIGKILL when its

@@ -84,6 +84,7 @@ __all__ = [
     "input_digests",
     "render_shard",
     "sample_meta",
+    "wait_for_workers",
 ]
 
 #: Progress callback: (complete samples, target samples, samples rendered by this run).
@@ -103,7 +104,8 @@ class GenerateReport:
     num_samples : samples requested.
     complete : samples of ``[0, num_samples)`` complete at the end.
     rendered : samples rendered by this call (0 when the store was already complete).
-    seconds : wall time of the rendering phase.
+    seconds : wall time of the rendering phase, until every shard is recorded (worker
+        processes are not waited for as they exit: :func:`wait_for_workers`).
     timing_s : seconds per stage (:data:`TIMING_KEYS`) summed over the shards rendered
         here, across all workers and threads; stages that run side by side (samples are
         labelled and written while later ones render) sum to more than ``seconds``.
@@ -215,7 +217,21 @@ def _run_local(
     # holds the last reference to the pool: dropped here, the executor's collection
     # would wait for the workers all the same (CPython >= 3.12 joins them holding a lock
     # that the collection takes; one run in three on the H100 host waited 1.4 s so).
-    threading.Thread(target=pool.shutdown, name="virtus-pool-shutdown", daemon=True).start()
+    reaper = threading.Thread(target=pool.shutdown, name="virtus-pool-shutdown", daemon=True)
+    reaper.start()
+    _REAPERS.append(reaper)
+
+
+def wait_for_workers() -> None:
+    """Return once the worker processes of every finished :func:`generate` call of this
+    process have exited (:func:`generate` does not wait for them: they release their GPU
+    memory, page-locked buffers and CPU time to the system as they go)."""
+    while _REAPERS:
+        _REAPERS.pop().join()
+
+
+#: Threads reaping the worker pools of finished runs (:func:`wait_for_workers`).
+_REAPERS: list[threading.Thread] = []
 
 
 def _next_task(queue: Any, workers: int) -> list[int]:
