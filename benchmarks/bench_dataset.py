@@ -33,8 +33,9 @@ before a plane) with :func:`virtus.data.generate`, once per ``--workers`` value 
   to the first run's);
   with ``--gpus 1`` on a GPU host, else with the first ``--workers``; with
   ``--disk-ceiling``, then the last store's files alone, written by as many processes as
-  it had workers (:func:`disk_ceiling`: until the writes return, and until they are on
-  the disk) -- what the disk allows any generator;
+  it had workers, each file handed to the disk as written (as the store does) and then
+  left to the page cache (:func:`disk_ceiling`: until the writes return, and until they
+  are on the disk) -- what the disk allows any generator;
 * with ``--gpus 1,2,4``: the same store made on 1, 2, 4 GPUs (``--workers-per-gpu`` pinned
   workers each, default 3/4 of the cores shared out over the most GPUs asked for), side by
   side: images/s over the whole run and in its steady state (between 10 % and 90 % of the
@@ -407,9 +408,14 @@ def stored_bytes(folder: Path) -> int:
     return sum(p.stat().st_size for p in folder.rglob("*") if p.is_file())
 
 
-def _write_shards(root: str, shards: list[int], sizes: list[int], seed: int) -> None:
+def _write_shards(root: str, shards: list[int], sizes: list[int], seed: int,
+                  writeback: bool) -> None:  # fmt: skip
     """One writer of :func:`disk_ceiling`: each shard's file of each array (``sizes``
-    bytes), written under a temporary name and renamed, as the store's shard writer does."""
+    bytes), written under a temporary name and renamed, as the store's shard writer does;
+    with ``writeback``, each file handed to the disk once written, as the store does
+    (:func:`virtus.data.shards.start_writeback`), else left to the page cache."""
+    from virtus.data.shards import start_writeback
+
     data = np.random.default_rng(seed).integers(0, 256, max(sizes), np.uint8).tobytes()
     for shard in shards:
         for array, size in enumerate(sizes):
@@ -418,15 +424,18 @@ def _write_shards(root: str, shards: list[int], sizes: list[int], seed: int) -> 
             temporary = folder / f".{shard}.tmp"
             with open(temporary, "wb") as handle:
                 handle.write(memoryview(data)[:size])
+                if writeback:
+                    start_writeback(handle)
             os.replace(temporary, folder / str(shard))
 
 
 def disk_ceiling(folder: Path, array_bytes: dict, samples: int, shard: int, writers: int,
-                 frames: int) -> dict:  # fmt: skip
+                 frames: int, writeback: bool = True) -> dict:  # fmt: skip
     """What the disk alone allows a run: ``writers`` processes write the files that
     ``samples`` samples make (each array's shard files, ``array_bytes`` a sample, random
-    bytes), and nothing else; then ``os.sync()``. Seconds until the writes return (into
-    the page cache) and until they are on the disk, as GB/s and the images/s they allow."""
+    bytes; each handed to the disk once written, as the store does, with ``writeback``),
+    and nothing else; then ``os.sync()``. Seconds until the writes return and until they
+    are on the disk, as GB/s and the images/s they allow."""
     import shutil
     from concurrent.futures import ProcessPoolExecutor
 
@@ -435,7 +444,7 @@ def disk_ceiling(folder: Path, array_bytes: dict, samples: int, shard: int, writ
     root = folder / "disk-ceiling"
     begin = time.perf_counter()
     with ProcessPoolExecutor(writers) as pool:
-        jobs = [pool.submit(_write_shards, str(root), shards[k::writers], sizes, k)
+        jobs = [pool.submit(_write_shards, str(root), shards[k::writers], sizes, k, writeback)
                 for k in range(writers)]  # fmt: skip
         for job in jobs:
             job.result()
@@ -445,7 +454,7 @@ def disk_ceiling(folder: Path, array_bytes: dict, samples: int, shard: int, writ
     total = len(shards) * sum(sizes)
     shutil.rmtree(root)
     return {
-        "writers": writers, "gb": round(total / 1e9, 2),
+        "writers": writers, "writeback": writeback, "gb": round(total / 1e9, 2),
         "written_s": round(written, 2), "written_gb_per_s": round(total / written / 1e9, 2),
         "written_images_per_s": round(len(shards) * shard * frames / written, 1),
         "synced_s": round(synced, 2), "synced_gb_per_s": round(total / synced / 1e9, 2),
@@ -455,7 +464,8 @@ def disk_ceiling(folder: Path, array_bytes: dict, samples: int, shard: int, writ
 
 def disk_line(entry: dict) -> str:
     return (
-        f"disk alone ({entry['writers']} writers, {entry['gb']} GB of the run's files): "
+        f"disk alone ({entry['writers']} writers, {entry['gb']} GB of the run's files, "
+        f"{'handed to the disk as written' if entry['writeback'] else 'left to the page cache'}): "
         f"written in {entry['written_s']} s ({entry['written_gb_per_s']} GB/s, "
         f"{entry['written_images_per_s']} images/s), on the disk after {entry['synced_s']} s "
         f"({entry['synced_gb_per_s']} GB/s, {entry['synced_images_per_s']} images/s)"
@@ -726,11 +736,15 @@ def main() -> None:
             compression = compression_runs(config, folder, args, per_gpu, frames_per_sample)
             if args.disk_ceiling:
                 writers = per_gpu * args.gpus[0] if args.gpus else args.workers[0]
-                disk = disk_ceiling(
-                    folder, compression[-1]["array_bytes_per_sample"], args.samples, args.shard,
-                    writers, frames_per_sample,
-                )  # fmt: skip
-                print(disk_line(disk), file=sys.stderr, flush=True)
+                disk = [
+                    disk_ceiling(
+                        folder, compression[-1]["array_bytes_per_sample"], args.samples,
+                        args.shard, writers, frames_per_sample, writeback,
+                    )
+                    for writeback in (True, False)
+                ]  # fmt: skip
+                for entry in disk:
+                    print(disk_line(entry), file=sys.stderr, flush=True)
             if args.codecs:  # one store to take the sample from
                 generate(config.with_num_samples(1), folder / "store_w1", workers=1)
             first = folder / "store_w1"
