@@ -27,7 +27,8 @@ before a plane) with :func:`virtus.data.generate`, once per ``--workers`` value 
   included), and every algorithm of nvCOMP on the same sample (:func:`nvcomp_rows`: speed,
   size, and whether plain Zarr could read it);
 * with ``--compress-on cpu gpu`` (codec ``zstd`` or ``shuffle-zstd``): the same store made
-  once per setting, side by side -- images/s (over the run and in its steady part), CPU
+  once per setting, side by side -- images/s (over the run and in its steady part), the
+  call's wall time and how long it took to return after the last shard's result, CPU
   seconds a sample and its split (render, labels, checksum, compression, io), compressed MB
   a sample, who encoded, and whether the arrays are the same (every sample's checksum equal
   to the first run's);
@@ -375,9 +376,11 @@ def compression_runs(config, folder: Path, args, per_gpu: int | None, frames: in
             ticks.append((time.perf_counter(), rendered))
 
         before = cpu_seconds()
+        called = time.perf_counter()
         report = generate(
             dataclasses.replace(config, compress_on=value), path, progress=progress, **where
         )
+        returned = time.perf_counter()
         cpu = cpu_seconds() - before
         steady = steady_rate(ticks, args.samples)
         store = DatasetStore.open(path)
@@ -390,6 +393,8 @@ def compression_runs(config, folder: Path, args, per_gpu: int | None, frames: in
             {
                 "compress_on": value, **where, "encoders": report.encoders,
                 "note": report.compression_note, "seconds": round(report.seconds, 3),
+                "call_s": round(returned - called, 3),
+                "end_s": round(returned - ticks[-1][0], 3),
                 "images_per_s": round(args.samples * frames / report.seconds, 1),
                 "steady_images_per_s": steady and round(steady * frames, 1),
                 "cpu_s_per_sample": round(cpu / args.samples, 4),
@@ -478,7 +483,8 @@ def compression_line(entry: dict) -> str:
     return (
         f"compress_on {entry['compress_on']} ({', '.join(entry['encoders'])}): "
         f"{entry['images_per_s']:.1f} images/s ({entry.get('steady_images_per_s')} in the "
-        f"steady part), {entry['cpu_s_per_sample']:.3f} CPU-s a sample "
+        f"steady part; the call {entry['call_s']} s, returning {entry['end_s']} s after the "
+        f"last shard's result), {entry['cpu_s_per_sample']:.3f} CPU-s a sample "
         f"(stage s a sample: {split}), {entry['mb_per_sample']:.1f} MB a sample, same arrays "
         f"as the first: {entry['same_arrays_as_first']}"
     )
