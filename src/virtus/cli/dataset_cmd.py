@@ -65,6 +65,7 @@ def generate(
     interruption to complete the store; the result equals an uninterrupted run's."""
     from virtus.data import generate as generate_dataset
     from virtus.data import load_config
+    from virtus.data.generate import wait_for_workers
 
     the_config = load_config(config)
     output = Output(json_out, quiet)
@@ -87,6 +88,10 @@ def generate(
         f"({report.rendered} rendered in {report.seconds:.1f} s)"
     )
     output.emit(summary)
+    # The run's workers exit after it, the report printed: the command ends once they
+    # have, here, where an interrupt is handled as the command's (not at the interpreter's
+    # exit, which would wait for them too).
+    wait_for_workers()
 
 
 @contextlib.contextmanager
