@@ -131,9 +131,9 @@ def cpu_seconds() -> float:
     one run's exiting workers out of the next run's time): spawned workers are its
     children; forked ones are the fork server's (:func:`virtus.data.devices.pinned_pool`),
     counted with the server's own start-up through its ``/proc`` record (it reaps them)."""
-    import multiprocessing.forkserver
     import resource
 
+    from virtus.data.devices import worker_server_pid
     from virtus.data.generate import wait_for_workers
 
     wait_for_workers()
@@ -141,7 +141,7 @@ def cpu_seconds() -> float:
     for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN):
         usage = resource.getrusage(who)
         total += usage.ru_utime + usage.ru_stime
-    server = getattr(multiprocessing.forkserver._forkserver, "_forkserver_pid", None)
+    server = worker_server_pid()
     if server is not None:
         try:
             stat = Path(f"/proc/{server}/stat").read_text().rsplit(")", 1)[1].split()

@@ -252,15 +252,13 @@ def _state(pid: int) -> str:
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux's fork server")
 def test_the_worker_server_starts_before_a_pool_and_forks_its_workers() -> None:
-    import multiprocessing.forkserver
-
-    from virtus.data.devices import start_worker_server
+    from virtus.data.devices import start_worker_server, worker_server_pid
 
     start_worker_server()
-    server = multiprocessing.forkserver._forkserver._forkserver_pid
+    server = worker_server_pid()
     assert server is not None and Path(f"/proc/{server}").exists()
     with pinned_pool(2) as pool:
         parents = {pool.submit(os.getppid).result() for _ in range(2)}
     assert parents == {server}  # forked by the server, not by this process
     start_worker_server()  # already running: the same server
-    assert multiprocessing.forkserver._forkserver._forkserver_pid == server
+    assert worker_server_pid() == server

@@ -5,7 +5,6 @@ bad ``--gpus`` / ``--workers-per-gpu`` values are refused in one line before any
 
 from __future__ import annotations
 
-import multiprocessing.forkserver
 import signal
 import subprocess
 import sys
@@ -15,7 +14,7 @@ import pytest
 
 from tests.data.test_dataset import run_cli, store_files, tiny_config
 from virtus.data import DatasetStore, generate, load_config
-from virtus.data.devices import CUDA_ENV, FAKE_GPUS_ENV
+from virtus.data.devices import CUDA_ENV, FAKE_GPUS_ENV, worker_server_pid
 from virtus.data.generate import _TASK_SHARDS, wait_for_workers
 
 
@@ -44,7 +43,7 @@ def test_wait_for_workers_returns_once_a_runs_workers_have_exited(tmp_path) -> N
     assert (report.complete, report.rendered) == (8, 8)
     assert report.encoders == {name: 4 for name in report.encoders} and len(report.encoders) == 1
     wait_for_workers()
-    server = multiprocessing.forkserver._forkserver._forkserver_pid
+    server = worker_server_pid()
     assert Path(f"/proc/{server}/task/{server}/children").read_text().split() == []
     again = generate(config, tmp_path / "store", workers=2)  # complete: nothing to render
     assert (again.complete, again.rendered) == (8, 0)

@@ -54,6 +54,7 @@ __all__ = [
     "variant_forces_cpu",
     "visible_gpus",
     "worker_context",
+    "worker_server_pid",
 ]
 
 #: Testing hook: an integer ``N`` makes ``N`` fake GPUs ``"0"`` .. ``"N-1"`` visible.
@@ -377,6 +378,16 @@ def start_worker_server() -> None:
         import multiprocessing.forkserver
 
         multiprocessing.forkserver.ensure_running()
+
+
+def worker_server_pid() -> int | None:
+    """The process id of the fork server that forks :func:`pinned_pool`'s workers (their
+    parent, which reaps them), or None where none has started in this process."""
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return None
+    from multiprocessing import forkserver
+
+    return getattr(forkserver._forkserver, "_forkserver_pid", None)
 
 
 def worker_context() -> Any:

@@ -92,6 +92,8 @@ Progress = Callable[[int, int, int], None]
 #: Most shards in one worker process's task (:func:`_next_task`): within a task each
 #: shard's write overlaps the next one's rendering.
 _TASK_SHARDS = 4
+#: Threads reaping the worker pools of finished runs (:func:`wait_for_workers`).
+_REAPERS: list[threading.Thread] = []
 
 
 @dataclass
@@ -228,10 +230,6 @@ def wait_for_workers() -> None:
     memory, page-locked buffers and CPU time to the system as they go)."""
     while _REAPERS:
         _REAPERS.pop().join()
-
-
-#: Threads reaping the worker pools of finished runs (:func:`wait_for_workers`).
-_REAPERS: list[threading.Thread] = []
 
 
 def _next_task(queue: Any, workers: int) -> list[int]:
